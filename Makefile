@@ -1,0 +1,28 @@
+# `make demo` and `make test` work on a fresh machine: they create .venv on first use.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test figures lint clean
+
+$(STAMP): pyproject.toml constraints.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -c constraints.txt -e ".[dev]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/caustics-jax demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q -n 2 --hypothesis-profile=ci
+
+figures: $(STAMP)
+	$(PY) -m experiments.conic_curve
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check caustics_jax experiments tests
+
+clean:
+	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -1,0 +1,85 @@
+"""Vector geometry shared by every layer: safe normalise, reflect, refract, exact Fresnel.
+
+Conventions (MATH.md §1): `refract` has exactly GLSL semantics so the shader port can be
+compared line by line; `eta` is the ratio incident/transmitted index.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+
+def dot(u: Float[Array, "*batch 3"], v: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
+    """Dot product over the last axis."""
+    return jnp.sum(u * v, axis=-1)
+
+
+def norm(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
+    """Euclidean length over the last axis, with a finite gradient at zero."""
+    sq = dot(v, v)
+    safe = jnp.where(sq > 0, sq, 1)
+    return jnp.where(sq > 0, jnp.sqrt(safe), 0)
+
+
+def safe_normalize(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
+    """`v / |v|`, and the zero vector (not NaN) where `|v| = 0`."""
+    length = norm(v)
+    inv = jnp.where(length > 0, 1 / jnp.where(length > 0, length, 1), 0)
+    return v * inv[..., None]
+
+
+def reflect(I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
+    """GLSL `reflect`: `I - 2 dot(N, I) N` (seed 004 Alg. 2 uses it for the reflection variant)."""
+    return I - 2 * dot(N, I)[..., None] * N
+
+
+def refract(
+    I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"], eta
+) -> Float[Array, "*batch 3"]:
+    """GLSL `refract` (seed 002 eq. 3.1-3.2; MATH.md §1).
+
+    `I` unit incident direction, `N` unit normal facing against it (`dot(N, I) <= 0`),
+    `eta` = n_incident / n_transmitted. `k = 1 - eta^2 (1 - dot(N, I)^2)`; total internal
+    reflection (`k < 0`) returns exactly the zero vector, otherwise
+    `eta I - (eta dot(N, I) + sqrt(k)) N`.
+    """
+    eta = jnp.asarray(eta, dtype=I.dtype)[..., None]
+    cos_i = dot(N, I)[..., None]
+    k = 1 - eta**2 * (1 - cos_i**2)
+    transmits = k >= 0
+    sqrt_k = _safe_sqrt(k)
+    out = eta * I - (eta * cos_i + sqrt_k) * N
+    return jnp.where(transmits, out, jnp.zeros_like(out))
+
+
+def _safe_sqrt(x):
+    """sqrt of `max(x, 0)` whose gradient stays finite at and below zero."""
+    positive = x > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1)), 0)
+
+
+def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
+    """Exact unpolarised dielectric Fresnel reflectance (the `F` of seed 001 eq. 25).
+
+    `cos_i = |cos|` of the incidence angle, `eta` = n_incident / n_transmitted (as in
+    `refract`). `R = (r_s^2 + r_p^2) / 2` with
+    `r_s = (eta cos_i - cos_t) / (eta cos_i + cos_t)`,
+    `r_p = (cos_i - eta cos_t) / (cos_i + eta cos_t)`; `R = 1` under total internal
+    reflection and at grazing incidence.
+    """
+    cos_i = jnp.clip(jnp.abs(cos_i), 0, 1)
+    eta = jnp.asarray(eta, dtype=cos_i.dtype)
+    sin_t2 = eta**2 * (1 - cos_i**2)
+    cos_t = _safe_sqrt(1 - sin_t2)
+    den_s = eta * cos_i + cos_t
+    den_p = cos_i + eta * cos_t
+    ok = (sin_t2 < 1) & (den_s > 0) & (den_p > 0)
+    r_s = (eta * cos_i - cos_t) / jnp.where(ok, den_s, 1)
+    r_p = (cos_i - eta * cos_t) / jnp.where(ok, den_p, 1)
+    return jnp.where(ok, (r_s**2 + r_p**2) / 2, 1)
+
+
+def fresnel_transmittance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
+    """Exact unpolarised dielectric Fresnel transmittance `1 - R` (energy, not radiance)."""
+    return 1 - fresnel_reflectance(cos_i, eta)
