@@ -1,0 +1,48 @@
+"""Barycentric conventions of seed 001 eq. 3, and the edge parametrisation every layer shares.
+
+`M = V0 + a (V1 - V0) + b (V2 - V0)`; inside the triangle when `a, b >= 0`, `a + b <= 1`.
+Edge `k` joins vertices `k` and `k + 1 mod 3`, with the parameter `t` of
+`edge_intersections`:
+
+| edge | line      | (a, b) at parameter t | t = 0 at | t = 1 at |
+|------|-----------|-----------------------|----------|----------|
+| 0    | b = 0     | (t, 0)                | V0       | V1       |
+| 1    | a + b = 1 | (1 - t, t)            | V1       | V2       |
+| 2    | a = 0     | (0, t)                | V0       | V2       |
+
+Edge 2 runs against the vertex order (from V0 to V2); `edge_param_from_vertex_order`
+converts to "t = 0 at vertex k", which is what crossing into a neighbour needs.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+
+def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> Float[Array, "*batch 2"]:
+    """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (table above)."""
+    t = jnp.asarray(t)
+    edge = jnp.asarray(edge)
+    a = jnp.where(edge == 0, t, jnp.where(edge == 1, 1 - t, 0))
+    b = jnp.where(edge == 0, 0, jnp.where(edge == 1, t, t))
+    return jnp.stack(jnp.broadcast_arrays(a.astype(t.dtype), b.astype(t.dtype)), axis=-1)
+
+
+def edge_param_from_vertex_order(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]):
+    """Map the table's `t` to `s` with `s = 0` at vertex `edge`, `s = 1` at vertex `edge + 1`.
+
+    The map is an involution (applying it twice gives `t` back).
+    """
+    return jnp.where(jnp.asarray(edge) == 2, 1 - t, t)
+
+
+def barycentric_point(V: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"]):
+    """World point `V0 + a (V1 - V0) + b (V2 - V0)` (seed 001 eq. 3)."""
+    a, b = ab[..., 0:1], ab[..., 1:2]
+    return V[..., 0, :] + a * (V[..., 1, :] - V[..., 0, :]) + b * (V[..., 2, :] - V[..., 0, :])
+
+
+def interpolated_normal(N: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"]):
+    """Unnormalised interpolated normal `n~ = n0 + a (n1 - n0) + b (n2 - n0)` (seed 001 eq. 6-8)."""
+    return barycentric_point(N, ab)
