@@ -5,6 +5,15 @@ the package: use `precision("float64")` or `enable_x64()`.
 """
 
 from ._precision import enable_x64, precision
+from .barycentric import barycentric_point, edge_barycentric, interpolated_normal
+from .conic import (
+    conic_coefficients,
+    conic_tangent,
+    conic_value,
+    edge_intersections,
+    solve_quadratic,
+    tangent_to_world,
+)
 from .geometry import (
     fresnel_reflectance,
     fresnel_transmittance,
@@ -12,15 +21,36 @@ from .geometry import (
     refract,
     safe_normalize,
 )
+from .objectives import (
+    ObjectiveStatus,
+    angle_difference_residual,
+    half_vector_residual,
+    signed_sine,
+    signed_sine_and_status,
+)
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "ObjectiveStatus",
+    "angle_difference_residual",
+    "barycentric_point",
+    "conic_coefficients",
+    "conic_tangent",
+    "conic_value",
+    "edge_barycentric",
+    "edge_intersections",
     "enable_x64",
     "fresnel_reflectance",
     "fresnel_transmittance",
+    "half_vector_residual",
+    "interpolated_normal",
     "precision",
     "reflect",
     "refract",
     "safe_normalize",
+    "signed_sine",
+    "signed_sine_and_status",
+    "solve_quadratic",
+    "tangent_to_world",
 ]

@@ -46,7 +46,9 @@ def refract(
     """
     eta = jnp.asarray(eta, dtype=I.dtype)[..., None]
     cos_i = dot(N, I)[..., None]
-    k = 1 - eta**2 * (1 - cos_i**2)
+    # GLSL's 1 - eta^2 (1 - cos^2), regrouped: 1 - cos^2 cancels near normal incidence and
+    # 1 - eta^2 sin^2 near grazing; (1 - eta)(1 + eta) + (eta cos)^2 has neither problem.
+    k = (1 - eta) * (1 + eta) + (eta * cos_i) ** 2
     transmits = k >= 0
     sqrt_k = _safe_sqrt(k)
     out = eta * I - (eta * cos_i + sqrt_k) * N
@@ -70,11 +72,11 @@ def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*ba
     """
     cos_i = jnp.clip(jnp.abs(cos_i), 0, 1)
     eta = jnp.asarray(eta, dtype=cos_i.dtype)
-    sin_t2 = eta**2 * (1 - cos_i**2)
-    cos_t = _safe_sqrt(1 - sin_t2)
+    cos_t2 = (1 - eta) * (1 + eta) + (eta * cos_i) ** 2  # 1 - sin_t^2 without cancellation
+    cos_t = _safe_sqrt(cos_t2)
     den_s = eta * cos_i + cos_t
     den_p = cos_i + eta * cos_t
-    ok = (sin_t2 < 1) & (den_s > 0) & (den_p > 0)
+    ok = (cos_t2 > 0) & (den_s > 0) & (den_p > 0)
     r_s = (eta * cos_i - cos_t) / jnp.where(ok, den_s, 1)
     r_p = (cos_i - eta * cos_t) / jnp.where(ok, den_p, 1)
     return jnp.where(ok, (r_s**2 + r_p**2) / 2, 1)

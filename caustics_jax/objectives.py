@@ -1,0 +1,135 @@
+"""Objectives whose zeros are refracted paths `P -> M -> L` (seed 001 §3.4.1, MATH.md §4).
+
+All take the triangle (`V`, `N`: vertex positions and normals, rows), the receiver `P`
+(inside the medium), the light `L` (outside), the barycentric point `ab` and
+`eta = eta_in / eta_out`, and broadcast over leading batch dimensions.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from .barycentric import barycentric_point, interpolated_normal
+from .conic import conic_coefficients, conic_tangent, tangent_to_world
+from .geometry import dot, norm, refract, safe_normalize
+
+
+class ObjectiveStatus(enum.IntEnum):
+    """Why an objective value is or is not meaningful at a point."""
+
+    OK = 0
+    TOTAL_INTERNAL_REFLECTION = 1  # refract(-w_P, -n_s, eta) is the zero vector
+    DEGENERATE = 2  # M coincides with P or L, or the interpolated normal vanishes
+
+
+def path_vectors(V, N, P, L, ab):
+    """`M`, shading normal `n_s`, `w_P`, `w_L` at `ab` (MATH.md §1), and a degeneracy flag."""
+    M = barycentric_point(V, ab)
+    n_tilde = interpolated_normal(N, ab)
+    PM, LM = P - M, L - M
+    degenerate = (norm(n_tilde) == 0) | (norm(PM) == 0) | (norm(LM) == 0)
+    return M, safe_normalize(n_tilde), safe_normalize(PM), safe_normalize(LM), degenerate
+
+
+def refracted_direction(V, N, P, L, ab, eta):
+    """`refract(-w_P, -n_s, eta)`: where the light arriving at `P` came from, seen at `M`."""
+    _, n_s, w_P, _, _ = path_vectors(V, N, P, L, ab)
+    return refract(-w_P, -n_s, eta)
+
+
+def signed_sine_and_status(
+    V: Float[Array, "*batch 3 3"],
+    N: Float[Array, "*batch 3 3"],
+    P: Float[Array, "*batch 3"],
+    L: Float[Array, "*batch 3"],
+    ab: Float[Array, "*batch 2"],
+    eta,
+) -> tuple[Float[Array, "*batch"], Int[Array, "*batch"]]:
+    """Signed sine `f` (seed 001 eq. 19-21) and an `ObjectiveStatus` per lane.
+
+    `f = s |r x w_L|` with `r = refract(-w_P, -n_s, eta)` and
+    `s = sign(t_world . (r x w_L))`, `t_world` the conic tangent (eq. 13-15) mapped to
+    world space. Under total internal reflection `r = 0` and the formula gives `f = 0`,
+    which is *not* a solution: the status says so, and solvers must read it.
+    """
+    _, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
+    r = refract(-w_P, -n_s, eta)
+    c = jnp.cross(r, w_L)
+    t_world = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
+    s = jnp.where(dot(t_world, c) >= 0, 1, -1).astype(c.dtype)
+    f = s * norm(c)
+    tir = dot(r, r) == 0
+    status = jnp.where(
+        degenerate,
+        ObjectiveStatus.DEGENERATE,
+        jnp.where(tir, ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, ObjectiveStatus.OK),
+    ).astype(jnp.int32)
+    return jnp.where(degenerate, 0, f), status
+
+
+def signed_sine(V, N, P, L, ab, eta) -> Float[Array, "*batch"]:
+    """Signed sine `f` of seed 001 eq. 19-21 (see `signed_sine_and_status`).
+
+    `f = 0` exactly on refracted paths, and also (spuriously) under total internal
+    reflection; use `signed_sine_and_status` wherever that matters.
+    """
+    return signed_sine_and_status(V, N, P, L, ab, eta)[0]
+
+
+def orthonormal_frame(n: Float[Array, "*batch 3"]):
+    """Tangent vectors `(s, t)` with `(s, t, n)` right-handed and orthonormal.
+
+    Branchless construction of Duff et al. 2017 ("Building an orthonormal basis,
+    revisited"): continuous except across `n_z = 0`'s sign switch, exact for unit `n`.
+    """
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    sign = jnp.where(z >= 0, 1, -1).astype(n.dtype)
+    a = -1 / (sign + z)
+    b = x * y * a
+    s = jnp.stack([1 + sign * x * x * a, sign * b, -sign * x], -1)
+    t = jnp.stack([b, sign + y * y * a, -y], -1)
+    return s, t
+
+
+def half_vector_residual(V, N, P, L, ab, eta) -> Float[Array, "*batch 2"]:
+    """Tangential part of the generalised half vector in the frame of `n_s` (Walter et al. 2009).
+
+    `h = -(eta_out w_L + eta_in w_P)` normalised (MATH.md §4, with `eta_out = 1`,
+    `eta_in = eta`); a refracted path has `h` parallel to `n_s`, so both components
+    vanish. `h` is the zero vector only for `eta = 1` on the straight line `P -> L`.
+    """
+    _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
+    eta = jnp.asarray(eta, dtype=w_P.dtype)[..., None]
+    h = safe_normalize(-(w_L + eta * w_P))
+    s, t = orthonormal_frame(n_s)
+    return jnp.stack([dot(h, s), dot(h, t)], -1)
+
+
+def _spherical_angles(d, n_s):
+    """(theta, phi) of `d` in the frame of `n_s`, with finite values and gradients everywhere."""
+    s, t = orthonormal_frame(n_s)
+    x, y, z = dot(d, s), dot(d, t), dot(d, n_s)
+    rho = norm(jnp.stack([x, y], -1))
+    theta = jnp.arctan2(rho, z)
+    pole = rho == 0
+    phi = jnp.arctan2(jnp.where(pole, 0, y), jnp.where(pole, 1, x))
+    return theta, phi
+
+
+def angle_difference_residual(V, N, P, L, ab, eta) -> Float[Array, "*batch 2"]:
+    """Spherical-angle differences between `refract(-w_P, -n_s, eta)` and `w_L` (Zeltner et al. 2020).
+
+    Angles are taken in the frame of `n_s`; the azimuth difference is wrapped to
+    `(-pi, pi]` and weighted by `sin(theta_L)` so that it does not blow up (or jump) at
+    the pole. Under total internal reflection the refracted vector is zero and the
+    residual is meaningless: check `signed_sine_and_status`.
+    """
+    _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
+    r = refract(-w_P, -n_s, eta)
+    theta_r, phi_r = _spherical_angles(r, n_s)
+    theta_l, phi_l = _spherical_angles(w_L, n_s)
+    dphi = jnp.remainder(phi_r - phi_l + jnp.pi, 2 * jnp.pi) - jnp.pi
+    return jnp.stack([theta_r - theta_l, jnp.sin(theta_l) * dphi], -1)

@@ -1,0 +1,119 @@
+"""Generators shared by tests and experiments: random triangles and planted refracted paths.
+
+Everything is drawn with numpy from an integer seed, in float64, then cast, so the same
+seed gives the same float64 reference and float32 copy (MATH.md §4 "verify with planted
+solutions").
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class PlantedPath(NamedTuple):
+    """A refracted path `P -> M -> L` through triangle `(V, N)` at barycentric `ab`.
+
+    Attributes:
+        V: `(n, 3, 3)` vertex positions (rows V0, V1, V2).
+        N: `(n, 3, 3)` unit vertex normals, outward (+z side, toward the light).
+        P: `(n, 3)` receiver below the surface (inside the medium).
+        L: `(n, 3)` light above the surface.
+        ab: `(n, 2)` barycentric coordinates of `M`, strictly inside the triangle.
+        M: `(n, 3)` the refraction point.
+        eta: the index ratio the path was planted with.
+    """
+
+    V: np.ndarray
+    N: np.ndarray
+    P: np.ndarray
+    L: np.ndarray
+    ab: np.ndarray
+    M: np.ndarray
+    eta: float
+
+    def astype(self, dtype) -> PlantedPath:
+        cast = lambda x: np.asarray(x, dtype=dtype)  # noqa: E731
+        return self._replace(V=cast(self.V), N=cast(self.N), P=cast(self.P), L=cast(self.L),
+                             ab=cast(self.ab), M=cast(self.M))
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def random_triangles(rng: np.random.Generator, n: int, *, size: float = 1.0,
+                     normal_spread: float = 0.3, min_angle_deg: float = 15.0):
+    """`n` random triangles near the plane `z = 0` with perturbed, outward (+z) unit normals.
+
+    Triangles are rejection-sampled to have every angle above `min_angle_deg` (no slivers:
+    the stress suite makes those on purpose). Returns `(V, N)` in float64.
+    """
+    V = np.empty((0, 3, 3))
+    while len(V) < n:
+        cand = rng.uniform(-size, size, (2 * n, 3, 3))
+        cand[..., 2] *= 0.15
+        e = [cand[:, (k + 1) % 3] - cand[:, k] for k in range(3)]
+        ang = []
+        for k in range(3):
+            u, w = -e[(k + 2) % 3], e[k]
+            c = np.sum(u * w, -1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(w, axis=-1))
+            ang.append(np.degrees(np.arccos(np.clip(c, -1, 1))))
+        ok = np.min(np.stack(ang, -1), -1) > min_angle_deg
+        # counter-clockwise seen from +z, so that the geometric normal points up like N
+        nz = np.cross(e[0], -e[2])[:, 2]
+        V = np.concatenate([V, cand[ok & (nz > 0)]])[:n]
+    N = _unit(np.array([0.0, 0.0, 1.0]) + normal_spread * rng.normal(size=(n, 3, 3)))
+    N[..., 2] = np.abs(N[..., 2])
+    return V, _unit(N)
+
+
+def _refract_np(I, N, eta):
+    """Float64 numpy GLSL refract, written independently of `geometry.refract`."""
+    cos_i = np.sum(N * I, -1, keepdims=True)
+    k = 1 - eta**2 * (1 - cos_i**2)
+    out = eta * I - (eta * cos_i + np.sqrt(np.maximum(k, 0))) * N
+    return np.where(k >= 0, out, 0.0)
+
+
+def planted_paths(seed: int, n: int, *, eta: float = 1.333, max_angle_deg: float = 40.0,
+                  depth: tuple[float, float] = (0.2, 2.0), height: tuple[float, float] = (0.5, 5.0),
+                  normal_spread: float = 0.3) -> PlantedPath:
+    """`n` refracted paths with known solution `M` (float64).
+
+    Pick a triangle, an interior `ab`, the shading normal `n_s` there, and a direction
+    `w_P` into the medium within `max_angle_deg` of `-n_s` (below the critical angle for
+    water, 48.6 deg); refract `-w_P` to get `w_L` and place `L = M + d_L w_L`.
+    """
+    rng = np.random.default_rng(seed)
+    V, N = random_triangles(rng, n, normal_spread=normal_spread)
+    w = rng.dirichlet([2.0, 2.0, 2.0], n)
+    ab = w[:, 1:]
+    M = V[:, 0] + ab[:, :1] * (V[:, 1] - V[:, 0]) + ab[:, 1:] * (V[:, 2] - V[:, 0])
+    n_tilde = N[:, 0] + ab[:, :1] * (N[:, 1] - N[:, 0]) + ab[:, 1:] * (N[:, 2] - N[:, 0])
+    n_s = _unit(n_tilde)
+    # w_P in a cone around -n_s; also keep it below the geometric plane side.
+    cos_max = np.cos(np.radians(max_angle_deg))
+    cos_t = rng.uniform(cos_max, 1.0, n)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    helper = np.where(np.abs(n_s[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    s = _unit(np.cross(n_s, helper))
+    t = np.cross(n_s, s)
+    sin_t = np.sqrt(1 - cos_t**2)[:, None]
+    w_P = -cos_t[:, None] * n_s + sin_t * (np.cos(phi)[:, None] * s + np.sin(phi)[:, None] * t)
+    w_L = _refract_np(-w_P, -n_s, eta)
+    P = M + rng.uniform(*depth, (n, 1)) * w_P
+    L = M + rng.uniform(*height, (n, 1)) * _unit(w_L)
+    return PlantedPath(V=V, N=N, P=P, L=L, ab=ab, M=M, eta=eta)
+
+
+def line_plane_barycentric(V, P, L):
+    """Barycentric `(a, b)` of `M0`, where line `PL` meets the triangle's plane (seed 001 §3.4.2).
+
+    Float64 numpy reference: solves `P + s (L - P) = V0 + a E1 + b E2`.
+    """
+    E1, E2 = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
+    A = np.stack([E1, E2, -(L - P)], -1)
+    sol = np.linalg.solve(A, (P - V[:, 0])[..., None])[..., 0]
+    return sol[:, :2]

@@ -1,0 +1,154 @@
+"""Properties of refract / reflect / Fresnel (MATH.md §1), float32 and float64."""
+
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from caustics_jax import fresnel_reflectance, fresnel_transmittance, reflect, refract, safe_normalize
+from caustics_jax.geometry import _safe_sqrt
+
+DTYPES = [jnp.float32, jnp.float64]
+# Measured float32 errors against float64 (experiments/float32_audit.py, 2026-11-22):
+# refract max 4.2e-7 (|T|, Snell), Fresnel max 1.2e-7. Bounds below keep ~5x margin.
+TOL = {jnp.float32: 3e-6, jnp.float64: 1e-13}
+
+refract_j = jax.jit(refract)
+fresnel_j = jax.jit(fresnel_reflectance)
+
+
+def _incident_and_normal(seed, n):
+    rng = np.random.default_rng(seed)
+    N = rng.normal(size=(n, 3))
+    N /= np.linalg.norm(N, axis=-1, keepdims=True)
+    I = rng.normal(size=(n, 3))
+    I /= np.linalg.norm(I, axis=-1, keepdims=True)
+    I = np.where(np.sum(I * N, -1, keepdims=True) > 0, -I, I)  # dot(N, I) <= 0
+    return I, N
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@given(seed=st.integers(0, 2**32 - 1), eta=st.floats(0.4, 2.5))
+def test_refract_obeys_snell_coplanarity_and_is_zero_exactly_under_tir(dtype, seed, eta):
+    I, N = _incident_and_normal(seed, 512)
+    T = np.asarray(refract_j(jnp.asarray(I, dtype), jnp.asarray(N, dtype), jnp.asarray(eta, dtype)))
+    assert T.dtype == dtype
+    cos_i = np.sum(N * I, -1)
+    k = 1 - eta**2 * (1 - cos_i**2)
+    tir = k < 0
+    margin = np.abs(k) > 1e-5  # lanes at the TIR boundary can round either way in float32
+    assert np.all(T[tir & margin] == 0)
+    ok = ~tir & margin
+    tol = TOL[dtype]
+    np.testing.assert_allclose(np.linalg.norm(T[ok], axis=-1), 1, atol=tol)
+    sin_i = np.linalg.norm(np.cross(N[ok], I[ok]), axis=-1)
+    sin_t = np.linalg.norm(np.cross(N[ok], T[ok]), axis=-1)
+    np.testing.assert_allclose(sin_t, eta * sin_i, atol=tol * max(1, eta))
+    coplanar = np.einsum("ij,ij->i", np.cross(I[ok], N[ok]), T[ok])
+    np.testing.assert_allclose(coplanar, 0, atol=tol)
+    # transmitted, not reflected: it keeps going through the interface
+    assert np.all(np.sum(T[ok] * N[ok], -1) <= tol)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_refract_is_identity_for_eta_one_and_at_normal_incidence(dtype):
+    I, N = _incident_and_normal(7, 64)
+    T = refract_j(jnp.asarray(I, dtype), jnp.asarray(N, dtype), 1.0)
+    np.testing.assert_allclose(np.asarray(T), I, atol=TOL[dtype])
+    T0 = refract_j(jnp.asarray(-N, dtype), jnp.asarray(N, dtype), 1.5)
+    np.testing.assert_allclose(np.asarray(T0), -N, atol=TOL[dtype])
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_reflect_preserves_angle_and_is_an_involution(dtype):
+    I, N = _incident_and_normal(3, 256)
+    I_, N_ = jnp.asarray(I, dtype), jnp.asarray(N, dtype)
+    R = reflect(I_, N_)
+    np.testing.assert_allclose(np.sum(np.asarray(R) * N, -1), -np.sum(I * N, -1), atol=TOL[dtype])
+    np.testing.assert_allclose(np.asarray(reflect(R, N_)), I, atol=2 * TOL[dtype])
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@given(eta=st.floats(0.3, 3.0), seed=st.integers(0, 2**32 - 1))
+def test_fresnel_is_in_unit_range_with_known_limits_and_reciprocity(dtype, eta, seed):
+    rng = np.random.default_rng(seed)
+    cos_i = rng.uniform(0, 1, 1024)
+    R = np.asarray(fresnel_j(jnp.asarray(cos_i, dtype), jnp.asarray(eta, dtype)))
+    assert R.dtype == dtype
+    assert np.all((R >= 0) & (R <= 1))
+    tol = TOL[dtype]
+    ends = np.asarray(fresnel_j(jnp.asarray([1.0, 0.0], dtype), jnp.asarray(eta, dtype)))
+    np.testing.assert_allclose(ends[0], ((eta - 1) / (eta + 1)) ** 2, atol=tol)
+    assert ends[1] == 1  # grazing incidence reflects everything
+    # Against the float64 kernel on the same (rounded) inputs.
+    cos_r = cos_i.astype(dtype).astype(np.float64)
+    eta_r = np.float64(dtype(eta))
+    R64 = np.asarray(fresnel_j(jnp.asarray(cos_r), jnp.asarray(eta_r)))
+    # R is ill-conditioned near the critical angle (dR/dcos_t ~ 1/cos_t): measured float32
+    # error <= 20 eps / max(cos_t, 1e-3) over 800k lanes; the bound keeps 2x margin.
+    cos_t = np.sqrt(np.maximum((1 - eta_r) * (1 + eta_r) + (eta_r * cos_r) ** 2, 0))
+    eps = np.finfo(dtype).eps
+    assert np.all(np.abs(R - R64) <= 40 * eps / np.maximum(cos_t, 1e-3) + tol / 10)
+    # Stokes reciprocity: T(theta_i, eta) = T(theta_t, 1/eta), a float64 identity.
+    sin_t2 = eta**2 * (1 - cos_i**2)
+    ok = sin_t2 < 1 - 1e-3
+    cos_t = np.sqrt(1 - sin_t2[ok])
+    R64 = np.asarray(fresnel_j(jnp.asarray(cos_i[ok]), jnp.asarray(eta, jnp.float64)))
+    T_back = np.asarray(fresnel_transmittance(jnp.asarray(cos_t), jnp.asarray(1 / eta)))
+    np.testing.assert_allclose(1 - R64, T_back, atol=1e-12)
+    assert np.all(R[sin_t2 > 1 + 1e-3] == 1)  # total internal reflection
+
+
+def test_fresnel_matches_textbook_value_for_water():
+    # Air -> water (n = 1.333) at 60 deg, by hand: sin_t = 0.8660 / 1.333 = 0.6497,
+    # cos_t = 0.7602; r_s = (0.5 - 1.0134) / (0.5 + 1.0134) = -0.3392, r_p =
+    # (0.6665 - 0.7602) / (0.6665 + 0.7602) = -0.0657; R = (0.1151 + 0.0043) / 2 = 0.0597.
+    cos_i = np.cos(np.radians(60.0))
+    n = 1.333
+    cos_t = np.sqrt(1 - (np.sin(np.radians(60.0)) / n) ** 2)
+    rs = ((cos_i - n * cos_t) / (cos_i + n * cos_t)) ** 2
+    rp = ((n * cos_i - cos_t) / (n * cos_i + cos_t)) ** 2
+    R = float(fresnel_reflectance(jnp.asarray(cos_i, jnp.float64), 1 / n))
+    assert abs(R - (rs + rp) / 2) < 1e-12
+    assert abs(R - 0.0597) < 2e-4
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_gradients_stay_finite_at_zero_vector_tir_and_grazing(dtype):
+    g = jax.grad(lambda v: jnp.sum(safe_normalize(v)))(jnp.zeros(3, dtype))
+    assert np.all(np.isfinite(g))
+    I = jnp.asarray([0.9, 0.0, -np.sqrt(1 - 0.81)], dtype)
+    N = jnp.asarray([0.0, 0.0, 1.0], dtype)
+    g_tir = jax.grad(lambda i: jnp.sum(refract(i, N, 1.333)))(I)
+    assert np.all(np.isfinite(g_tir))
+    g_f = jax.grad(lambda c: fresnel_reflectance(c, 1.333))(jnp.asarray(0.0, dtype))
+    assert np.isfinite(g_f)
+    assert np.isfinite(jax.grad(lambda x: _safe_sqrt(x))(jnp.asarray(0.0, dtype)))
+
+
+def test_importing_the_package_does_not_enable_float64():
+    code = "import caustics_jax, jax; print(jax.config.jax_enable_x64)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_precision_context_switches_float64_on_and_back_off():
+    code = (
+        "import caustics_jax as cj, jax.numpy as jnp\n"
+        "with cj.precision('float64'):\n"
+        "    a = jnp.zeros(2).dtype\n"
+        "b = jnp.zeros(2).dtype\n"
+        "print(a, b)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["float64", "float32"]
+    with pytest.raises(ValueError, match="float32 or float64"):
+        import caustics_jax as cj
+
+        with cj.precision("int32"):
+            pass
