@@ -1,0 +1,152 @@
+"""Objectives at planted refracted paths (seed 001 eq. 16-21; MATH.md §4)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from caustics_jax import (
+    ObjectiveStatus,
+    angle_difference_residual,
+    conic_coefficients,
+    half_vector_residual,
+    signed_sine_and_status,
+    solve_quadratic,
+)
+from caustics_jax.testing import _refract_np, planted_paths
+
+DTYPES = [jnp.float32, jnp.float64]
+# Objective values at planted solutions (float64 M rounded to the dtype). Measured maxima
+# (experiments/float32_audit.py): float32 |f| 1.9e-6, half-vector 1.6e-6, angle 2.5e-6;
+# float64 below 1e-15. Bounds keep ~5x margin.
+ZERO_TOL = {jnp.float32: 1.5e-5, jnp.float64: 1e-12}
+
+objectives_j = jax.jit(
+    lambda V, N, P, L, ab, eta: (
+        signed_sine_and_status(V, N, P, L, ab, eta),
+        half_vector_residual(V, N, P, L, ab, eta),
+        angle_difference_residual(V, N, P, L, ab, eta),
+    )
+)
+
+
+def _cast(p, dtype):
+    return [jnp.asarray(x, dtype) for x in (p.V, p.N, p.P, p.L, p.ab)]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@given(seed=st.integers(0, 2**32 - 1), eta=st.sampled_from([1.333, 1.5, 1.1]))
+def test_every_objective_vanishes_at_planted_solutions(dtype, seed, eta):
+    p = planted_paths(seed, 512, eta=eta)
+    (f, status), h, ang = objectives_j(*_cast(p, dtype), eta)
+    assert f.dtype == h.dtype == ang.dtype == dtype
+    assert np.all(np.asarray(status) == ObjectiveStatus.OK)
+    tol = ZERO_TOL[dtype]
+    assert np.max(np.abs(np.asarray(f))) < tol
+    assert np.max(np.abs(np.asarray(h))) < tol
+    assert np.max(np.abs(np.asarray(ang))) < tol
+
+
+def _signed_sine_reference(V, N, P, L, ab, eta):
+    """Float64 numpy seed 001 eq. 19-21, written independently of the package."""
+    a, b = ab[:, :1], ab[:, 1:]
+    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
+    n = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
+    n_s = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    w_P = (P - M) / np.linalg.norm(P - M, axis=-1, keepdims=True)
+    w_L = (L - M) / np.linalg.norm(L - M, axis=-1, keepdims=True)
+    c = np.cross(_refract_np(-w_P, -n_s, eta), w_L)
+    # tangent from the gradient of n~ . (PL x PM) w.r.t. (a, b), by central differences
+    def g(ab_):
+        a_, b_ = ab_[:, :1], ab_[:, 1:]
+        M_ = V[:, 0] + a_ * (V[:, 1] - V[:, 0]) + b_ * (V[:, 2] - V[:, 0])
+        n_ = N[:, 0] + a_ * (N[:, 1] - N[:, 0]) + b_ * (N[:, 2] - N[:, 0])
+        return np.sum(n_ * np.cross(L - P, M_ - P), -1)
+    h = 1e-6
+    ga = (g(ab + [h, 0]) - g(ab - [h, 0])) / (2 * h)
+    gb = (g(ab + [0, h]) - g(ab - [0, h])) / (2 * h)
+    t_world = -gb[:, None] * (V[:, 1] - V[:, 0]) + ga[:, None] * (V[:, 2] - V[:, 0])
+    return np.sign(np.sum(t_world * c, -1)) * np.linalg.norm(c, axis=-1)
+
+
+def _points_on_curve_near(p, coef, da):
+    """Points of the conic at `a + da`, on the branch through the planted `ab`."""
+    A, B, C, D, E, F = np.moveaxis(np.asarray(coef), -1, 0)
+    a = p.ab[:, 0] + da
+    b, valid = (np.asarray(x) for x in solve_quadratic(
+        jnp.asarray(B), jnp.asarray(C * a + E), jnp.asarray(A * a * a + D * a + F)))
+    pick = np.argmin(np.where(valid, np.abs(b - p.ab[:, 1:]), np.inf), -1)
+    b_near = np.take_along_axis(b, pick[:, None], -1)[:, 0]
+    ok = valid.any(-1) & (np.abs(b_near - p.ab[:, 1]) < 20 * abs(da))
+    return np.stack([a, b_near], -1), ok
+
+
+def test_signed_sine_matches_independent_reference_including_sign():
+    p = planted_paths(21, 512)
+    coef = conic_coefficients(*(jnp.asarray(x) for x in (p.V, p.N, p.P, p.L)))
+    ab, ok = _points_on_curve_near(p, coef, 0.03)
+    f, status = signed_sine_and_status(*(jnp.asarray(x) for x in (p.V, p.N, p.P, p.L, ab)), p.eta)
+    ref = _signed_sine_reference(p.V, p.N, p.P, p.L, ab, p.eta)
+    ok &= np.asarray(status) == 0
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(np.asarray(f)[ok], ref[ok], rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_signed_sine_changes_sign_across_planted_solution_along_the_curve(dtype):
+    """The orientation s of eq. 21 makes f continuous through its zero: f(-h) f(+h) < 0.
+
+    Without the sign (f = |sin|) every bracket test of the walk would fail.
+    """
+    p = planted_paths(23, 1024)
+    coef = conic_coefficients(*(jnp.asarray(x) for x in (p.V, p.N, p.P, p.L)))
+    h = 2e-3
+    sides = []
+    ok = np.ones(len(p.ab), bool)
+    for da in (-h, h):
+        ab, ok_side = _points_on_curve_near(p, coef, da)
+        f, status = objectives_j(*_cast(p._replace(ab=ab), dtype), p.eta)[0]
+        sides.append(np.asarray(f))
+        ok &= ok_side & (np.asarray(status) == 0)
+    assert ok.mean() > 0.9
+    f_minus, f_plus = sides
+    assert np.all(f_minus[ok] * f_plus[ok] < 0)
+    # and away from the solution the objectives are clearly non-zero
+    assert np.min(np.abs(f_plus[ok])) > 1e-6
+    ab_far, ok_far = _points_on_curve_near(p, coef, 0.05)
+    _, h_far, ang_far = objectives_j(*_cast(p._replace(ab=ab_far), dtype), p.eta)
+    assert np.median(np.linalg.norm(np.asarray(h_far)[ok_far], axis=-1)) > 1e-3
+    assert np.median(np.linalg.norm(np.asarray(ang_far)[ok_far], axis=-1)) > 1e-3
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_total_internal_reflection_is_reported_not_mistaken_for_a_root(dtype):
+    p = planted_paths(29, 256)
+    # Move P far sideways so that -w_P is beyond the critical angle at M.
+    P_tir = p.M + np.array([8.0, 0.0, -0.5])
+    f, status = objectives_j(*_cast(p._replace(P=P_tir), dtype), p.eta)[0]
+    f, status = np.asarray(f), np.asarray(status)
+    n = p.N[:, 0] + p.ab[:, :1] * (p.N[:, 1] - p.N[:, 0]) + p.ab[:, 1:] * (p.N[:, 2] - p.N[:, 0])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    w_P = (P_tir - p.M) / np.linalg.norm(P_tir - p.M, axis=-1, keepdims=True)
+    k = 1 - p.eta**2 * (1 - np.sum(n * w_P, -1) ** 2)
+    clear = np.abs(k) > 1e-3
+    assert (k < -1e-3).mean() > 0.8
+    np.testing.assert_array_equal(status[clear] == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, k[clear] < 0)
+    assert np.all(f[status == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION] == 0)  # status tells
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_degenerate_inputs_give_status_and_finite_values(dtype):
+    p = planted_paths(31, 64)
+    # P exactly at M = V0 (ab = 0): w_P is undefined
+    at_v0 = p._replace(P=p.V[:, 0], ab=np.zeros_like(p.ab))
+    (f, status), h, ang = objectives_j(*_cast(at_v0, dtype), p.eta)
+    assert np.all(np.asarray(status) == ObjectiveStatus.DEGENERATE)
+    for x in (f, h, ang):
+        assert np.all(np.isfinite(np.asarray(x)))
+    grads = jax.grad(lambda ab: jnp.sum(objectives_j(*_cast(p, dtype)[:4], ab, p.eta)[1]))(
+        jnp.asarray(p.ab, dtype))
+    assert np.all(np.isfinite(np.asarray(grads)))
