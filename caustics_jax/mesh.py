@@ -1,0 +1,400 @@
+"""SurfaceMesh: the refractive surface the solvers walk on, its adjacency and edge crossing.
+
+A triangle mesh with per-vertex unit normals oriented outward (toward the light, MATH.md
+§1), geometric face normals, and an adjacency buffer: `neighbors[f, k]` is the face across
+edge `k` of face `f` (edge `k` joins vertices `k` and `k + 1 mod 3`, as in
+`barycentric.py`), `-1` on a boundary, and `neighbor_edge[f, k]` is which edge of that
+neighbour it is, so a walk crosses an edge in O(1) (`cross_edge`).
+
+Everything that can fail (NaN coordinates, bad indices, degenerate faces, non-manifold
+edges, inconsistent winding, zero normals) is checked in numpy by `from_arrays`, which
+raises a `ValueError` naming the offending faces or vertices before any jitted work.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from ._precision import check_float_dtype
+from .barycentric import edge_barycentric, edge_param_from_vertex_order
+
+_MAX_NAMED = 10  # how many offending indices an error message lists
+
+
+@dataclasses.dataclass(frozen=True)
+class GridInfo:
+    """Static layout of a regular heightfield grid (hashable: usable as a static field).
+
+    The surface is `z = h(x, y)` sampled at vertex `(i, j)` = `(x0 + i dx, y0 + j dy)`,
+    `i in [0, nx]`, `j in [0, ny]`, vertex index `j (nx + 1) + i`. Cell `(i, j)`
+    (`i < nx`, `j < ny`) holds faces `2 (j nx + i)` ("lower", vertices
+    `v00, v10, v11`) and `2 (j nx + i) + 1` ("upper", vertices `v00, v11, v01`), both
+    counter-clockwise seen from +z, split along the diagonal `v00 -> v11`.
+    `z_min, z_max` bound the heights; they are static, so a mesh whose heights change must
+    be rebuilt (`SurfaceMesh.from_heightfield`) for the start-point fast path to stay exact.
+    """
+
+    nx: int
+    ny: int
+    x0: float
+    y0: float
+    dx: float
+    dy: float
+    z_min: float
+    z_max: float
+
+    def vertex_xy(self) -> np.ndarray:
+        """`(V, 2)` float64 xy positions of the grid vertices, in vertex order."""
+        x = self.x0 + self.dx * np.arange(self.nx + 1)
+        y = self.y0 + self.dy * np.arange(self.ny + 1)
+        X, Y = np.meshgrid(x, y, indexing="xy")
+        return np.stack([X.ravel(), Y.ravel()], axis=-1)
+
+    def faces(self) -> np.ndarray:
+        """`(2 nx ny, 3)` int32 faces in the layout above."""
+        i, j = np.meshgrid(np.arange(self.nx), np.arange(self.ny), indexing="xy")
+        v00 = (j * (self.nx + 1) + i).ravel()
+        v10, v01 = v00 + 1, v00 + self.nx + 1
+        v11 = v01 + 1
+        lower = np.stack([v00, v10, v11], axis=-1)
+        upper = np.stack([v00, v11, v01], axis=-1)
+        return np.stack([lower, upper], axis=1).reshape(-1, 3).astype(np.int32)
+
+    def cell_faces(self, i, j):
+        """Indices of the (lower, upper) faces of cell `(i, j)` (works on jax or numpy ints)."""
+        f = 2 * (j * self.nx + i)
+        return f, f + 1
+
+
+class SurfaceMesh(eqx.Module):
+    """Triangle mesh with interpolated normals and O(1) adjacency; a pytree usable in `jit`.
+
+    Attributes:
+        vertices: `(V, 3)` positions.
+        faces: `(F, 3)` int32 vertex indices, counter-clockwise seen from outside.
+        normals: `(V, 3)` unit vertex normals, outward (toward the light).
+        face_normals: `(F, 3)` unit geometric normals `(V1 - V0) x (V2 - V0) / |.|`.
+        neighbors: `(F, 3)` int32, face across edge `k` (vertices `k`, `k+1 mod 3`), -1 on
+            a boundary.
+        neighbor_edge: `(F, 3)` int32, index of that shared edge within the neighbour, -1
+            on a boundary.
+        grid: static `GridInfo` when the surface is a regular heightfield grid, else None.
+    """
+
+    vertices: Float[Array, "V 3"]
+    faces: Int[Array, "F 3"]
+    normals: Float[Array, "V 3"]
+    face_normals: Float[Array, "F 3"]
+    neighbors: Int[Array, "F 3"]
+    neighbor_edge: Int[Array, "F 3"]
+    grid: GridInfo | None = eqx.field(static=True, default=None)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        vertices,
+        faces,
+        normals=None,
+        *,
+        normal_weighting: str = "angle",
+        grid: GridInfo | None = None,
+        dtype=None,
+    ) -> SurfaceMesh:
+        """Validate, build adjacency and normals, and return a mesh (numpy work, no jit).
+
+        `normals=None` computes vertex normals from the faces: `normal_weighting="angle"`
+        (default; each incident face's unit normal weighted by the face's corner angle at
+        the vertex, Thürmer & Wüthrich 1998, independent of how a region is tessellated) or
+        `"area"` (weighted by face area, i.e. the sum of unnormalised cross products).
+        Given normals are normalised. The winding defines "outward": a given normal that
+        points against every incident face is rejected. `dtype` defaults to the input's
+        float dtype (float64 only when x64 is on, else float32). `grid`, when given, is
+        checked against the vertices and faces.
+        """
+        V64, F = _validate_geometry(vertices, faces)
+        neighbors, neighbor_edge = _adjacency(F)
+        face_n = np.cross(V64[F[:, 1]] - V64[F[:, 0]], V64[F[:, 2]] - V64[F[:, 0]])
+        face_n /= np.linalg.norm(face_n, axis=-1, keepdims=True)
+        if normals is None:
+            N = _vertex_normals(V64, F, normal_weighting)
+            _check_normals(N, F, face_n, what="computed")
+        else:
+            N = np.asarray(normals, dtype=np.float64)
+            if N.shape != V64.shape:
+                raise ValueError(
+                    f"normals must have shape {V64.shape} (one per vertex), got {N.shape}"
+                )
+            _check_normals(N, F, face_n, what="given")
+        N = N / np.linalg.norm(N, axis=-1, keepdims=True)
+        if grid is not None:
+            _check_grid(grid, V64, F)
+        dtype = _float_dtype(vertices, dtype)
+        return cls(
+            vertices=jnp.asarray(V64, dtype=dtype),
+            faces=jnp.asarray(F, dtype=jnp.int32),
+            normals=jnp.asarray(N, dtype=dtype),
+            face_normals=jnp.asarray(face_n, dtype=dtype),
+            neighbors=jnp.asarray(neighbors, dtype=jnp.int32),
+            neighbor_edge=jnp.asarray(neighbor_edge, dtype=jnp.int32),
+            grid=grid,
+        )
+
+    @classmethod
+    def from_trimesh(cls, mesh, normals=None, **kwargs) -> SurfaceMesh:
+        """Mesh from a `trimesh.Trimesh` (so OBJ/PLY/STL/GLB load through `trimesh.load`).
+
+        A `trimesh.Scene` (GLB, multi-object OBJ) is concatenated into one mesh. Vertex
+        normals are recomputed (`normal_weighting`, default angle) unless `normals` is
+        given: trimesh invents normals for files that have none, and merges or splits
+        vertices on load, so its own normals are not trusted.
+        """
+        import trimesh
+
+        if isinstance(mesh, trimesh.Scene):
+            mesh = (
+                mesh.to_geometry() if hasattr(mesh, "to_geometry") else mesh.dump(concatenate=True)
+            )
+        return cls.from_arrays(np.asarray(mesh.vertices), np.asarray(mesh.faces), normals, **kwargs)
+
+    @classmethod
+    def from_heightfield(
+        cls,
+        heights,
+        *,
+        x0: float,
+        y0: float,
+        dx: float,
+        dy: float,
+        normals=None,
+        dtype=None,
+        **kwargs,
+    ) -> SurfaceMesh:
+        """Regular grid mesh of `z = heights[j, i]` at `(x0 + i dx, y0 + j dy)` (`GridInfo` layout).
+
+        `heights` has shape `(ny + 1, nx + 1)`; `normals`, if given, `(ny + 1, nx + 1, 3)`.
+        """
+        H = np.asarray(heights, dtype=np.float64)
+        if H.ndim != 2 or min(H.shape) < 2:
+            raise ValueError(
+                f"heights must have shape (ny + 1, nx + 1) with nx, ny >= 1, got {H.shape}"
+            )
+        if not np.all(np.isfinite(H)):
+            bad = np.flatnonzero(~np.isfinite(H.ravel()))
+            raise ValueError(f"heights contain NaN or Inf at vertices {_name(bad)}")
+        grid = GridInfo(
+            nx=H.shape[1] - 1,
+            ny=H.shape[0] - 1,
+            x0=float(x0),
+            y0=float(y0),
+            dx=float(dx),
+            dy=float(dy),
+            z_min=float(H.min()),
+            z_max=float(H.max()),
+        )
+        V = np.concatenate([grid.vertex_xy(), H.reshape(-1, 1)], axis=-1)
+        if normals is not None:
+            normals = np.asarray(normals).reshape(-1, 3)
+        return cls.from_arrays(
+            V, grid.faces(), normals, grid=grid, dtype=_float_dtype(heights, dtype), **kwargs
+        )
+
+    @property
+    def dtype(self):
+        return self.vertices.dtype
+
+    def triangle(
+        self, face: Int[Array, "*batch"]
+    ) -> tuple[Float[Array, "*batch 3 3"], Float[Array, "*batch 3 3"]]:
+        """Vertex positions `V` and unit vertex normals `N` of faces, rows V0, V1, V2.
+
+        Negative (invalid) face indices gather face 0, so masked lanes stay finite.
+        """
+        idx = self.faces[jnp.maximum(jnp.asarray(face), 0)]
+        return self.vertices[idx], self.normals[idx]
+
+    def astype(self, dtype) -> SurfaceMesh:
+        """The same mesh with float fields in `dtype` (float32 or float64)."""
+        dtype = check_float_dtype(dtype)
+        return dataclasses.replace(
+            self,
+            vertices=self.vertices.astype(dtype),
+            normals=self.normals.astype(dtype),
+            face_normals=self.face_normals.astype(dtype),
+        )
+
+
+def cross_edge(
+    mesh: SurfaceMesh,
+    face: Int[Array, "*batch"],
+    edge: Int[Array, "*batch"],
+    t: Float[Array, "*batch"],
+):
+    """Cross edge `edge` of `face` at edge parameter `t` into the neighbouring face.
+
+    `t` is the `barycentric.py` edge parameter of the exit point. Returns
+    `(next_face, next_edge, next_t, next_ab)`: the neighbour, the index of the shared
+    edge within it, the entry point's parameter on that edge (same convention) and its
+    barycentrics `(a, b)` in the neighbour, which give the same world point. On a boundary
+    (or for `face < 0`) `next_face = next_edge = -1` and `next_t, next_ab` are the
+    exit point's own `t` and barycentrics.
+    """
+    face, edge = jnp.asarray(face), jnp.asarray(edge)
+    t = jnp.asarray(t, dtype=mesh.dtype)
+    valid_in = face >= 0
+    f, k = jnp.maximum(face, 0), jnp.clip(edge, 0, 2)
+    g = jnp.where(valid_in, mesh.neighbors[f, k], -1)
+    k_next = jnp.where(g >= 0, mesh.neighbor_edge[f, k], -1)
+    # s = 0 at vertex k of this face; consistent winding runs the shared edge the other
+    # way in the neighbour, so there the same point sits at 1 - s from vertex k_next.
+    s = edge_param_from_vertex_order(k, t)
+    t_next = edge_param_from_vertex_order(jnp.maximum(k_next, 0), 1 - s)
+    crossed = g >= 0
+    t_out = jnp.where(crossed, t_next, t)
+    ab = edge_barycentric(jnp.where(crossed, k_next, k), t_out)
+    return g.astype(jnp.int32), k_next.astype(jnp.int32), t_out, ab
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _name(idx, limit: int = _MAX_NAMED) -> str:
+    idx = np.unique(np.asarray(idx).ravel())
+    shown = ", ".join(str(int(i)) for i in idx[:limit])
+    return f"[{shown}{', ...' if len(idx) > limit else ''}] ({len(idx)} in all)"
+
+
+def _float_dtype(like, dtype):
+    if dtype is not None:
+        return check_float_dtype(dtype)
+    in_dtype = getattr(like, "dtype", None)
+    if in_dtype is not None and jnp.dtype(in_dtype) == jnp.dtype("float32"):
+        return jnp.dtype("float32")
+    return jnp.dtype("float64") if jax.config.jax_enable_x64 else jnp.dtype("float32")
+
+
+def _validate_geometry(vertices, faces):
+    V = np.asarray(vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (V, 3), got {V.shape}")
+    F = np.asarray(faces)
+    if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
+        raise ValueError(f"faces must have shape (F, 3) with F >= 1, got {F.shape}")
+    if not np.issubdtype(F.dtype, np.integer):
+        raise ValueError(f"faces must be integer vertex indices, got dtype {F.dtype}")
+    bad_v = np.flatnonzero(~np.all(np.isfinite(V), axis=-1))
+    if bad_v.size:
+        raise ValueError(f"vertices contain NaN or Inf coordinates: vertices {_name(bad_v)}")
+    bad_f = np.flatnonzero(np.any((F < 0) | (F >= len(V)), axis=-1))
+    if bad_f.size:
+        raise ValueError(f"face vertex indices out of range [0, {len(V)}): faces {_name(bad_f)}")
+    F = F.astype(np.int64)
+    repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    if repeated.any():
+        raise ValueError(
+            f"degenerate faces (repeated vertex index): faces {_name(np.flatnonzero(repeated))}"
+        )
+    e1, e2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    e3 = V[F[:, 2]] - V[F[:, 1]]
+    twice_area = np.linalg.norm(np.cross(e1, e2), axis=-1)
+    longest_sq = np.max(np.stack([np.sum(e * e, -1) for e in (e1, e2, e3)]), axis=0)
+    # Zero area relative to the face's own size: a sliver whose area is at the float64
+    # rounding level of its edge lengths has no usable normal.
+    zero = twice_area <= 64 * np.finfo(np.float64).eps * longest_sq
+    if zero.any():
+        raise ValueError(f"degenerate faces (zero area): faces {_name(np.flatnonzero(zero))}")
+    return V, F
+
+
+def _adjacency(F: np.ndarray):
+    """`neighbors, neighbor_edge` by sorting undirected edge keys (vectorised, O(F log F))."""
+    n_f = len(F)
+    a = F.reshape(-1)  # half-edge h = 3 f + k runs from F[f, k] to F[f, k + 1 mod 3]
+    b = F[:, [1, 2, 0]].reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo * (int(F.max()) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    k_sorted = key[order]
+    start = np.flatnonzero(np.r_[True, k_sorted[1:] != k_sorted[:-1]])
+    count = np.diff(np.r_[start, len(k_sorted)])
+    if (count > 2).any():
+        bad_h = order[np.repeat(count > 2, count)]
+        edges = sorted({(int(lo[h]), int(hi[h])) for h in bad_h[: 3 * _MAX_NAMED]})
+        raise ValueError(
+            "non-manifold edges (shared by more than two faces): "
+            f"vertex pairs {edges[:_MAX_NAMED]}, "
+            f"faces {_name(bad_h // 3)}; {int((count > 2).sum())} such edges in all"
+        )
+    pair = start[count == 2]
+    h0, h1 = order[pair], order[pair + 1]
+    same_direction = a[h0] == a[h1]
+    if same_direction.any():
+        bad = np.concatenate([h0[same_direction], h1[same_direction]]) // 3
+        raise ValueError(
+            "inconsistent winding (a shared edge runs the same way in both faces, so their "
+            f"normals disagree): faces {_name(bad)}"
+        )
+    neighbors = np.full(3 * n_f, -1, dtype=np.int64)
+    neighbor_edge = np.full(3 * n_f, -1, dtype=np.int64)
+    neighbors[h0], neighbor_edge[h0] = h1 // 3, h1 % 3
+    neighbors[h1], neighbor_edge[h1] = h0 // 3, h0 % 3
+    return neighbors.reshape(n_f, 3), neighbor_edge.reshape(n_f, 3)
+
+
+def _vertex_normals(V, F, weighting: str):
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    if weighting == "area":
+        w = np.ones((len(F), 3))
+        n_face = cross  # |cross| = 2 area: the area weight comes for free
+    elif weighting == "angle":
+        n_face = cross / np.linalg.norm(cross, axis=-1, keepdims=True)
+        w = np.empty((len(F), 3))
+        for k in range(3):  # three corners, vectorised over faces
+            u = V[F[:, (k + 1) % 3]] - V[F[:, k]]
+            v = V[F[:, (k + 2) % 3]] - V[F[:, k]]
+            w[:, k] = np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, -1))
+    else:
+        raise ValueError(f"normal_weighting must be 'angle' or 'area', got {weighting!r}")
+    N = np.zeros_like(V)
+    for k in range(3):
+        np.add.at(N, F[:, k], w[:, k : k + 1] * n_face)
+    return N
+
+
+def _check_normals(N, F, face_n, *, what: str):
+    bad = np.flatnonzero(~np.all(np.isfinite(N), axis=-1))
+    if bad.size:
+        raise ValueError(f"{what} normals contain NaN or Inf: vertices {_name(bad)}")
+    length = np.linalg.norm(N, axis=-1)
+    zero = np.flatnonzero(length <= np.finfo(np.float64).tiny ** 0.5)
+    if zero.size:
+        hint = " (unreferenced vertices, or incident faces cancel)" if what == "computed" else ""
+        raise ValueError(f"{what} normals are zero{hint}: vertices {_name(zero)}")
+    if what == "given":
+        # Outward is defined by the winding: a normal against all incident faces is flipped.
+        agree = np.full(len(N), -np.inf)
+        for k in range(3):
+            np.maximum.at(agree, F[:, k], np.sum(N[F[:, k]] * face_n, -1))
+        flipped = np.flatnonzero(agree <= 0)
+        if flipped.size:
+            raise ValueError(
+                f"given normals point against the face winding at vertices {_name(flipped)} "
+                "(outward = counter-clockwise seen from outside)"
+            )
+
+
+def _check_grid(grid: GridInfo, V, F):
+    if len(V) != (grid.nx + 1) * (grid.ny + 1) or not np.array_equal(F, grid.faces()):
+        raise ValueError(f"vertices/faces do not follow the GridInfo layout {grid}")
+    off = np.flatnonzero(
+        np.any(np.abs(V[:, :2] - grid.vertex_xy()) > 1e-9 * max(grid.dx, grid.dy), axis=-1)
+    )
+    if off.size:
+        raise ValueError(f"vertices off the regular grid xy positions: vertices {_name(off)}")
+    if V[:, 2].min() < grid.z_min or V[:, 2].max() > grid.z_max:
+        raise ValueError(f"heights outside GridInfo z range [{grid.z_min}, {grid.z_max}]")

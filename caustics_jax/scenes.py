@@ -1,0 +1,342 @@
+"""Reproducible scenes of the papers: flat pool, wavy pool (Gerstner waves), lagoon.
+
+Each generator is seeded (numpy `default_rng(seed)`, float64, then cast) and returns a
+`Scene`: the water surface (a `SurfaceMesh`, outward normals +z), receiver points on the
+floor (under the water, inside the medium) with their floor normals, and the lights.
+
+Geometry (metres): water around `z = 0`, floor at about `z = -depth` (`depth = 1`), pool
+`2 half_size` wide (4 m), the water surface extended a little past the pool walls as in
+seed 001 §5, lights a few metres above.
+
+`Scene.is_grid` is True when the surface is a regular heightfield grid: vertices exactly
+at `(x0 + i dx, y0 + j dy)` with the `GridInfo` face layout (`surface.grid` is set), the
+property the O(1)-per-cell start-point fast path relies on. Gerstner waves with horizontal
+displacement (`wavy_pool(..., choppiness > 0)`) move vertices off that grid, so those
+surfaces are built as general meshes (`is_grid = False`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .mesh import GridInfo, SurfaceMesh, _float_dtype
+
+GRAVITY = 9.81
+
+
+class Lights(eqx.Module):
+    """Point and directional lights.
+
+    Attributes:
+        position: `(K, 3)` position of each point light; for a directional light, the
+            point `far * direction` (only a representative; use `endpoint`).
+        direction: `(K, 3)` unit vector toward the light (for a point light, from the
+            origin toward it).
+        directional: static tuple of K flags, True for a directional light.
+        far: static distance used to turn a directional light into a segment end.
+    """
+
+    position: Float[Array, "K 3"]
+    direction: Float[Array, "K 3"]
+    directional: tuple[bool, ...] = eqx.field(static=True)
+    far: float = eqx.field(static=True, default=100.0)
+
+    def endpoint(self, P: Float[Array, "*batch 3"], k: int = 0) -> Float[Array, "*batch 3"]:
+        """Segment end `L` for receivers `P` and light `k` (the light itself, or `P + far d`)."""
+        if self.directional[k]:
+            return P + self.far * self.direction[k].astype(P.dtype)
+        return jnp.broadcast_to(self.position[k].astype(P.dtype), P.shape)
+
+
+class Scene(eqx.Module):
+    """A generated scene.
+
+    Attributes:
+        surface: the water surface.
+        receivers: `(R, 3)` receiver points on the floor, under the water.
+        receiver_normals: `(R, 3)` unit floor normals at the receivers (+z up).
+        lights: the lights.
+        is_grid: static; True when `surface` is a regular heightfield grid (`surface.grid`).
+        name: static scene name with its parameters.
+    """
+
+    surface: SurfaceMesh
+    receivers: Float[Array, "R 3"]
+    receiver_normals: Float[Array, "R 3"]
+    lights: Lights
+    is_grid: bool = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+
+
+# --------------------------------------------------------------------------- generators
+
+
+def flat_pool(
+    n_triangles: int = 512,
+    *,
+    seed: int = 0,
+    half_size: float = 2.0,
+    depth: float = 1.0,
+    n_receivers: int = 32,
+    receiver_jitter: float = 0.0,
+    light: str = "point",
+    light_position=(0.4, -0.3, 3.0),
+    dtype=None,
+) -> Scene:
+    """A still pool: the plane `z = 0` as a regular grid of about `n_triangles` triangles."""
+    rng = np.random.default_rng(seed)
+    g = _pool_layout(half_size, n_triangles)
+    mesh = SurfaceMesh.from_heightfield(
+        np.zeros((g.ny + 1, g.nx + 1)),
+        x0=g.x0,
+        y0=g.y0,
+        dx=g.dx,
+        dy=g.dy,
+        normals=np.broadcast_to([0.0, 0.0, 1.0], (g.ny + 1, g.nx + 1, 3)),
+        dtype=dtype,
+    )
+    R, Rn = _pool_receivers(rng, half_size, depth, n_receivers, receiver_jitter)
+    return _scene(
+        mesh, R, Rn, light, light_position, True, f"flat_pool(n_triangles={mesh.faces.shape[0]})"
+    )
+
+
+def wavy_pool(
+    n_triangles: int = 8192,
+    *,
+    seed: int = 0,
+    amplitude: float = 0.03,
+    n_waves: int = 4,
+    wavelength=(0.6, 2.0),
+    choppiness: float = 0.0,
+    time: float = 0.0,
+    half_size: float = 2.0,
+    depth: float = 1.0,
+    n_receivers: int = 32,
+    receiver_jitter: float = 0.0,
+    light: str = "point",
+    light_position=(0.4, -0.3, 3.0),
+    dtype=None,
+) -> Scene:
+    """A pool whose water is a sum of `n_waves` Gerstner waves (GPU Gems 1 ch. 1).
+
+    Wave `i`: amplitude `A_i` (the `A_i` sum to `amplitude`, so `|z| <= amplitude`),
+    wavelength uniform in `wavelength`, direction `D_i` within +-45 degrees of a random
+    wind, phase uniform, deep-water dispersion `omega_i = sqrt(g k_i)`. Surface point of
+    the rest position `x`: `(x - sum Q_i A_i D_i sin theta_i, sum A_i cos theta_i)`,
+    `theta_i = k_i D_i . x - omega_i time + phi_i`. The default gentle sea has maximum
+    slope `sum A_i k_i` of about 0.1-0.3.
+
+    `choppiness = 0` (default) keeps vertices on the regular xy grid: a heightfield grid
+    (`is_grid = True`) of `2 nx ny >= n_triangles` faces. `0 < choppiness < 1` sets
+    `sum Q_i A_i k_i = choppiness`, which displaces x/y (no fold-over below 1) and gives a
+    general mesh (`is_grid = False`). Normals are analytic: the cross product of the
+    surface's partial derivatives at each vertex, not mesh averages.
+    """
+    if not 0 <= choppiness < 1:
+        raise ValueError(
+            f"choppiness must be in [0, 1) so the surface does not fold, got {choppiness}"
+        )
+    rng = np.random.default_rng(seed)
+    g = _pool_layout(half_size, n_triangles)
+    waves = _gerstner_waves(rng, amplitude, n_waves, wavelength, choppiness)
+    X, N = _gerstner_surface(waves, g.vertex_xy(), time)
+    R, Rn = _pool_receivers(rng, half_size, depth, n_receivers, receiver_jitter)
+    name = (
+        f"wavy_pool(n_triangles={2 * g.nx * g.ny}, seed={seed}, amplitude={amplitude}, "
+        f"choppiness={choppiness})"
+    )
+    if choppiness == 0:
+        mesh = SurfaceMesh.from_heightfield(
+            X[:, 2].reshape(g.ny + 1, g.nx + 1),
+            x0=g.x0,
+            y0=g.y0,
+            dx=g.dx,
+            dy=g.dy,
+            normals=N.reshape(g.ny + 1, g.nx + 1, 3),
+            dtype=dtype,
+        )
+        return _scene(mesh, R, Rn, light, light_position, True, name)
+    # Same connectivity as the grid, but the vertices have moved off it: a general mesh.
+    mesh = SurfaceMesh.from_arrays(X, g.faces(), N, dtype=_float_dtype(None, dtype))
+    return _scene(mesh, R, Rn, light, light_position, False, name)
+
+
+def lagoon(
+    n_triangles: int = 8192,
+    *,
+    seed: int = 0,
+    size=(6.0, 4.0),
+    amplitude: float = 0.03,
+    n_waves: int = 4,
+    wavelength=(0.6, 2.0),
+    time: float = 0.0,
+    depth: float = 1.0,
+    floor_relief: float = 0.3,
+    n_receivers: int = 32,
+    light: str = "point",
+    light_position=(0.4, -0.3, 3.0),
+    dtype=None,
+) -> Scene:
+    """A lagoon: irregular floor, water triangulated irregularly (Delaunay of jittered points).
+
+    The water covers the rectangle `size` (centred at the origin) with about `n_triangles`
+    Delaunay triangles of randomly jittered points (no grid structure, `is_grid = False`);
+    its height is a sum of Gerstner waves without horizontal displacement, with analytic
+    normals. The floor is `z = -depth + relief(x, y)`, a seeded sum of random sinusoids
+    with `|relief| <= floor_relief`; receivers sit on it on an `n_receivers`-per-side grid,
+    with the floor's analytic normals.
+    """
+    from scipy.spatial import Delaunay
+
+    if floor_relief >= depth:
+        raise ValueError(
+            f"floor_relief {floor_relief} must stay below depth {depth} (floor under water)"
+        )
+    rng = np.random.default_rng(seed)
+    W, H = size
+    # Delaunay of n points in convex position-free general position: F ~ 2 n - hull.
+    h = math.sqrt(W * H / max(n_triangles / 2, 1))
+    mx, my = max(round(W / h), 2), max(round(H / h), 2)
+    gx, gy = np.meshgrid(
+        np.linspace(-W / 2, W / 2, mx + 1), np.linspace(-H / 2, H / 2, my + 1), indexing="xy"
+    )
+    pts = np.stack([gx.ravel(), gy.ravel()], -1)
+    interior = (np.abs(pts[:, 0]) < W / 2 - 1e-9) & (np.abs(pts[:, 1]) < H / 2 - 1e-9)
+    # Interior points jittered by up to 0.35 cell: irregular yet no two points coincide.
+    pts[interior] += rng.uniform(-0.35, 0.35, (interior.sum(), 2)) * [W / mx, H / my]
+    tri = Delaunay(pts).simplices
+    p0, p1, p2 = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
+    cw = (p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p1[:, 1] - p0[:, 1]) * (
+        p2[:, 0] - p0[:, 0]
+    ) < 0
+    tri[cw] = tri[cw][:, [0, 2, 1]]
+    waves = _gerstner_waves(rng, amplitude, n_waves, wavelength, 0.0)
+    X, N = _gerstner_surface(waves, pts, time)
+    mesh = SurfaceMesh.from_arrays(X, tri, N, dtype=_float_dtype(None, dtype))
+    relief = _relief(rng, floor_relief, size)
+    rx, ry = np.meshgrid(
+        *[(np.arange(n_receivers) + 0.5) / n_receivers * s - s / 2 for s in size], indexing="xy"
+    )
+    rxy = np.stack([rx.ravel(), ry.ravel()], -1)
+    z, grad = relief(rxy)
+    R = np.concatenate([rxy, (z - depth)[:, None]], -1)
+    Rn = np.concatenate([-grad, np.ones((len(R), 1))], -1)
+    Rn /= np.linalg.norm(Rn, axis=-1, keepdims=True)
+    return _scene(
+        mesh,
+        R,
+        Rn,
+        light,
+        light_position,
+        False,
+        f"lagoon(n_triangles={mesh.faces.shape[0]}, seed={seed})",
+    )
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _pool_layout(half_size: float, n_triangles: int) -> GridInfo:
+    """Grid of `2 nx ny >= n_triangles` faces (nearly square cells) over the pool.
+
+    The water extends 5% past the pool walls (seed 001 §5 extends it "slightly"). Heights
+    (`z_min = z_max = 0`) are placeholders: only the xy layout is used.
+    """
+    if n_triangles < 2:
+        raise ValueError(f"n_triangles must be >= 2, got {n_triangles}")
+    ny = max(round(math.sqrt(n_triangles / 2)), 1)
+    nx = max(math.ceil(n_triangles / (2 * ny)), 1)
+    half = 1.05 * half_size
+    return GridInfo(nx=nx, ny=ny, x0=-half, y0=-half, dx=2 * half / nx, dy=2 * half / ny,
+                    z_min=0.0, z_max=0.0)  # fmt: skip
+
+
+def _gerstner_waves(rng, amplitude, n_waves, wavelength, choppiness):
+    w = rng.uniform(0.5, 1.0, n_waves)
+    A = amplitude * w / w.sum()
+    lam = rng.uniform(*wavelength, n_waves)
+    k = 2 * np.pi / lam
+    wind = rng.uniform(0, 2 * np.pi)
+    ang = wind + rng.uniform(-np.pi / 4, np.pi / 4, n_waves)
+    D = np.stack([np.cos(ang), np.sin(ang)], -1)
+    phase = rng.uniform(0, 2 * np.pi, n_waves)
+    slope = np.sum(A * k)
+    Q = np.full(n_waves, choppiness / slope if slope > 0 else 0.0)
+    return dict(A=A, k=k, D=D, phase=phase, Q=Q, omega=np.sqrt(GRAVITY * k))
+
+
+def _gerstner_surface(waves, xy, time):
+    """Surface points `(n, 3)` and analytic unit normals `(n, 3)` at rest positions `xy`."""
+    A, k, D, Q = waves["A"], waves["k"], waves["D"], waves["Q"]
+    theta = k * (xy @ D.T) - waves["omega"] * time + waves["phase"]  # (n, waves)
+    s, c = np.sin(theta), np.cos(theta)
+    X = np.concatenate([xy - (Q * A * s) @ D, (c @ A)[:, None]], -1)
+    # Partial derivatives of the displaced point along the rest x and y axes.
+    QAkc = Q * A * k * c
+    dXdx = np.stack(
+        [1 - QAkc @ (D[:, 0] ** 2), -QAkc @ (D[:, 0] * D[:, 1]), -(A * k * s) @ D[:, 0]], -1
+    )
+    dXdy = np.stack(
+        [-QAkc @ (D[:, 0] * D[:, 1]), 1 - QAkc @ (D[:, 1] ** 2), -(A * k * s) @ D[:, 1]], -1
+    )
+    N = np.cross(dXdx, dXdy)
+    return X, N / np.linalg.norm(N, axis=-1, keepdims=True)
+
+
+def _relief(rng, amplitude, size, n_terms: int = 6):
+    """Random smooth floor relief `r(x, y)` with `|r| <= amplitude`, and its gradient."""
+    lam = rng.uniform(0.8, 3.0, n_terms)
+    ang = rng.uniform(0, 2 * np.pi, n_terms)
+    K = (2 * np.pi / lam)[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    phase = rng.uniform(0, 2 * np.pi, n_terms)
+    a = rng.uniform(0.5, 1.0, n_terms)
+    a *= amplitude / a.sum()
+
+    def relief(xy):
+        theta = xy @ K.T + phase
+        return np.sin(theta) @ a, (np.cos(theta) * a) @ K
+
+    return relief
+
+
+def _pool_receivers(rng, half_size, depth, n, jitter):
+    u = (np.arange(n) + 0.5) / n * 2 * half_size - half_size
+    X, Y = np.meshgrid(u, u, indexing="xy")
+    xy = np.stack([X.ravel(), Y.ravel()], -1)
+    if jitter:
+        xy += rng.uniform(-0.5, 0.5, xy.shape) * jitter * 2 * half_size / n
+    R = np.concatenate([xy, np.full((len(xy), 1), -depth)], -1)
+    return R, np.broadcast_to([0.0, 0.0, 1.0], R.shape)
+
+
+def _scene(mesh, R, Rn, light, light_position, is_grid, name) -> Scene:
+    kinds = {"point": (False,), "directional": (True,), "both": (False, True)}
+    if light not in kinds:
+        raise ValueError(f"light must be one of {sorted(kinds)}, got {light!r}")
+    directional = kinds[light]
+    pos = np.asarray(light_position, dtype=np.float64)
+    d = pos / np.linalg.norm(pos)
+    far = 100.0
+    position = np.stack([far * d if is_dir else pos for is_dir in directional])
+    direction = np.stack([d for _ in directional])
+    dtype = mesh.dtype
+    lights = Lights(
+        position=jnp.asarray(position, dtype),
+        direction=jnp.asarray(direction, dtype),
+        directional=directional,
+        far=far,
+    )
+    return Scene(
+        surface=mesh,
+        receivers=jnp.asarray(R, dtype),
+        receiver_normals=jnp.asarray(Rn, dtype),
+        lights=lights,
+        is_grid=is_grid,
+        name=name,
+    )
