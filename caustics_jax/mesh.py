@@ -36,8 +36,8 @@ class GridInfo:
     (`i < nx`, `j < ny`) holds faces `2 (j nx + i)` ("lower", vertices
     `v00, v10, v11`) and `2 (j nx + i) + 1` ("upper", vertices `v00, v11, v01`), both
     counter-clockwise seen from +z, split along the diagonal `v00 -> v11`.
-    `z_min, z_max` bound the heights; they are static, so a mesh whose heights change must
-    be rebuilt (`SurfaceMesh.from_heightfield`) for the start-point fast path to stay exact.
+    Only the xy layout is static: heights live in `SurfaceMesh.vertices` and may change
+    (animated water, `eqx.tree_at`) without recompiling anything keyed on the layout.
     """
 
     nx: int
@@ -46,8 +46,6 @@ class GridInfo:
     y0: float
     dx: float
     dy: float
-    z_min: float
-    z_max: float
 
     def vertex_xy(self) -> np.ndarray:
         """`(V, 2)` float64 xy positions of the grid vertices, in vertex order."""
@@ -194,8 +192,6 @@ class SurfaceMesh(eqx.Module):
             y0=float(y0),
             dx=float(dx),
             dy=float(dy),
-            z_min=float(H.min()),
-            z_max=float(H.max()),
         )
         V = np.concatenate([grid.vertex_xy(), H.reshape(-1, 1)], axis=-1)
         if normals is not None:
@@ -396,5 +392,3 @@ def _check_grid(grid: GridInfo, V, F):
     )
     if off.size:
         raise ValueError(f"vertices off the regular grid xy positions: vertices {_name(off)}")
-    if V[:, 2].min() < grid.z_min or V[:, 2].max() > grid.z_max:
-        raise ValueError(f"heights outside GridInfo z range [{grid.z_min}, {grid.z_max}]")

@@ -245,16 +245,14 @@ def lagoon(
 def _pool_layout(half_size: float, n_triangles: int) -> GridInfo:
     """Grid of `2 nx ny >= n_triangles` faces (nearly square cells) over the pool.
 
-    The water extends 5% past the pool walls (seed 001 §5 extends it "slightly"). Heights
-    (`z_min = z_max = 0`) are placeholders: only the xy layout is used.
+    The water extends 5% past the pool walls (seed 001 §5 extends it "slightly").
     """
     if n_triangles < 2:
         raise ValueError(f"n_triangles must be >= 2, got {n_triangles}")
     ny = max(round(math.sqrt(n_triangles / 2)), 1)
     nx = max(math.ceil(n_triangles / (2 * ny)), 1)
     half = 1.05 * half_size
-    return GridInfo(nx=nx, ny=ny, x0=-half, y0=-half, dx=2 * half / nx, dy=2 * half / ny,
-                    z_min=0.0, z_max=0.0)  # fmt: skip
+    return GridInfo(nx=nx, ny=ny, x0=-half, y0=-half, dx=2 * half / nx, dy=2 * half / ny)
 
 
 def _gerstner_waves(rng, amplitude, n_waves, wavelength, choppiness):

@@ -249,7 +249,7 @@ def test_shape_errors_and_bad_grid_are_rejected():
         SurfaceMesh.from_arrays(_SQUARE_V, _SQUARE_F.astype(float))
     with pytest.raises(ValueError, match="heights contain NaN or Inf at vertices \\[3\\]"):
         SurfaceMesh.from_heightfield([[0, 0], [0, np.nan]], x0=0, y0=0, dx=1, dy=1)
-    grid = GridInfo(nx=1, ny=1, x0=0.0, y0=0.0, dx=1.0, dy=1.0, z_min=0.0, z_max=0.0)
+    grid = GridInfo(nx=1, ny=1, x0=0.0, y0=0.0, dx=1.0, dy=1.0)
     flat = np.concatenate([grid.vertex_xy(), np.zeros((4, 1))], -1)
     SurfaceMesh.from_arrays(flat, grid.faces(), grid=grid)  # on the grid: accepted
     bent = flat.copy()
