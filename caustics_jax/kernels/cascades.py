@@ -1,0 +1,170 @@
+"""Cascaded caustic maps of seed 004 (eq. 1-7, Alg. 1; MATH.md §8).
+
+Level `c` of `N` renders the water surface from the light with an orthographic
+projection `s^c` times wider than level 0, at the same `W x H` resolution. The centre
+`W/s x H/s` texels of level `c` are already covered by level `c - 1`, so Alg. 1 gives
+level `c > 0` only the ring around that hole: `W H (1 - 1/s^2)` threads (eq. 4).
+
+Alg. 1 as printed does not map threads one-to-one onto that ring. Three lines are
+fixed here and each fix is pinned by `tests/kernels/test_kernels_cascades.py`:
+
+- line 24 `LocalTid - Region1` -> `LocalTid - Region0` (side bands start at Region0);
+- line 26 `NewTid.x > DeltaX` -> `>=` (column DeltaX is the hole's first column);
+- line 33 `LocalTid - Region0` -> `LocalTid - Region1` (top band starts at Region1).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ._util import as_float, check, check_last_axis, float_dtype
+
+
+def light_position(
+    o: Float[Array, "*batch 3"], l_dir: Float[Array, "*batch 3"], z_near, z_far
+) -> Float[Array, "*batch 3"]:
+    """Light position for the cascade views (seed 004 eq. 1): `o - l_dir (z_near + z_far)`.
+
+    The prose says "an amount equal to the distance between the near and far planes",
+    which would be `z_far - z_near`; the equation (implemented) backs off further, so the
+    whole frustum is in front of the light for any `z_near >= 0`.
+    """
+    check_last_axis(o, "o", 3)
+    check_last_axis(l_dir, "l_dir", 3)
+    dtype = float_dtype(o, l_dir)
+    back = as_float(z_near, dtype) + as_float(z_far, dtype)
+    return jnp.asarray(o, dtype) - jnp.asarray(l_dir, dtype) * jnp.asarray(back)[..., None]
+
+
+def cascade_projection(
+    width, height, near, far, s, level, dtype=jnp.float32
+) -> Float[Array, "4 4"]:
+    """Orthographic light projection of cascade `level` (seed 004 eq. 2), row-vector form.
+
+    `[x y z 1] @ P` maps `x in [-w s^i/2, w s^i/2]` to `[-1, 1]` (same for `y`) and
+    `z in [near, far]` to `[0, 1]` (Direct3D convention, as the paper's DXR renderer).
+    The printed bottom row reads `(far - near)/(far - near)` in the `z` column, which
+    would map `near` to `near/(far - near) + 1`; the D3D matrix has `-near/(far - near)`
+    there, which is what we use.
+    """
+    check(width, "width", lower=0, strict=True)
+    check(height, "height", lower=0, strict=True)
+    check(s, "s", lower=1)
+    check(level, "level", lower=0)
+    if np.any(np.asarray(far) <= np.asarray(near)):
+        raise ValueError(f"far must exceed near, got near={near}, far={far}")
+    scale = as_float(s, dtype) ** as_float(level, dtype)
+    depth = as_float(far, dtype) - as_float(near, dtype)
+    zero = jnp.zeros((), dtype)
+    one = jnp.ones((), dtype)
+    rows = [
+        [2 / (as_float(width, dtype) * scale), zero, zero, zero],
+        [zero, 2 / (as_float(height, dtype) * scale), zero, zero],
+        [zero, zero, 1 / depth, zero],
+        [zero, zero, -as_float(near, dtype) / depth, one],
+    ]
+    return jnp.stack([jnp.stack(r) for r in rows])
+
+
+def ccm0_size(r_width, r_height, p) -> int:
+    """Innermost caustic-map size from light range and precision (seed 004 eq. 3).
+
+    256, 512, 1024 or 2048 (square) as `max(r.width, r.height) / p` is below 256, 512,
+    1024, or not. Static configuration, so plain Python.
+    """
+    if p <= 0 or r_width <= 0 or r_height <= 0:
+        raise ValueError("range and precision must be positive")
+    ratio = max(r_width, r_height) / p
+    for size in (256, 512, 1024):
+        if ratio < size:
+            return size
+    return 2048
+
+
+def cascade_deltas(ccm0_x: int, ccm0_y: int, s: int) -> tuple[int, int]:
+    """Ring thickness `(DeltaX, DeltaY)` (seed 004 eq. 6): `ccm0 (1 - 1/s) / 2`.
+
+    Raises ValueError unless they are whole texels, which Alg. 1's integer arithmetic
+    needs (e.g. power-of-two maps with `s` a power of two).
+    """
+    if s < 2 or int(s) != s:
+        raise ValueError(f"s must be an integer >= 2, got {s}")
+    dx, dy = ccm0_x * (s - 1) / (2 * s), ccm0_y * (s - 1) / (2 * s)
+    if dx != int(dx) or dy != int(dy) or ccm0_x % s or ccm0_y % s:
+        raise ValueError(f"ccm0 {ccm0_x}x{ccm0_y} with s={s} gives fractional texels")
+    return int(dx), int(dy)
+
+
+def cascade_thread_counts(ccm0_x: int, ccm0_y: int, s: int, n_levels: int) -> tuple[int, ...]:
+    """Threads per level (seed 004 eq. 4): `W H` for level 0, `W H (1 - 1/s^2)` after.
+
+    Eq. 4 multiplies the map *size* by `(1 - 1/s^2)`; read as a thread count (an area) it
+    is exactly the ring `W H - (W/s)(H/s)`. Applied to each of `.x` and `.y`, as Alg. 1's
+    `ccm[i].x x ccm[i].y` suggests, it would give `W H (1 - 1/s^2)^2`, too few threads.
+    The total (eq. 5) is `sum(...)`; eq. 5 sums to `N` where levels run `0..N-1`.
+    """
+    cascade_deltas(ccm0_x, ccm0_y, s)
+    if n_levels < 1:
+        raise ValueError(f"n_levels must be >= 1, got {n_levels}")
+    ring = ccm0_x * ccm0_y - (ccm0_x // s) * (ccm0_y // s)
+    return (ccm0_x * ccm0_y,) + (ring,) * (n_levels - 1)
+
+
+def cascade_intensity_scale(
+    level: Int[Array, "*batch"], s, dtype=jnp.float32
+) -> Float[Array, "*batch"]:
+    """Light intensity scale of a cascade level (seed 004 eq. 7): `L = s^(2c)`.
+
+    A level-`c` texel covers `s^(2c)` level-0 texels, so this keeps the flux per unit
+    area the same on every level. Alg. 3 lines 4-6 loop `for i = 0 to c`, which would
+    give `s^(2(c+1))`; the test of flux conservation settles on eq. 7.
+    """
+    check(s, "s", lower=1)
+    check(level, "level", lower=0)
+    return as_float(s, dtype) ** (2 * jnp.asarray(level).astype(dtype))
+
+
+def cascade_dispatch(
+    tid: Int[Array, "*batch"], ccm0_x: int, ccm0_y: int, s: int, n_levels: int
+) -> tuple[Int[Array, "*batch 2"], Int[Array, "*batch"], Bool[Array, "*batch"]]:
+    """Dispatch thread id to `(texel, level, valid)` (seed 004 Alg. 1, three lines fixed).
+
+    Threads `0 .. W H - 1` fill level 0 row by row. Each later level gets
+    `W H (1 - 1/s^2)` threads laid out as the bottom band (`Region0 = W DeltaY`
+    threads), the left and right bands (`2 DeltaX (H - 2 DeltaY)`, up to `Region1`) and
+    the top band. `valid` is False past the last level (texel and level are then 0).
+    """
+    W, H = ccm0_x, ccm0_y
+    dx, dy = cascade_deltas(W, H, s)
+    counts = cascade_thread_counts(W, H, s, n_levels)
+    tid = jnp.asarray(tid).astype(jnp.int32)
+    valid = (tid >= 0) & (tid < sum(counts))
+    ring = counts[-1] if n_levels > 1 else 1
+    region0 = W * dy
+    region1 = region0 + 2 * dx * (H - 2 * dy)
+
+    beyond = jnp.maximum(tid - W * H, 0)
+    level = jnp.where(tid < W * H, 0, 1 + beyond // ring)
+    local = beyond % ring
+    side = local - region0  # line 24 fixed: Region0, not Region1
+    x_side = side % (2 * dx)
+    x_side = jnp.where(x_side >= dx, x_side + (W - 2 * dx), x_side)  # line 26 fixed: >=
+    top = local - region1  # line 33 fixed: Region1, not Region0
+    x = jnp.where(
+        tid < W * H,
+        tid % W,
+        jnp.where(local < region0, local % W, jnp.where(local < region1, x_side, top % W)),
+    )
+    y = jnp.where(
+        tid < W * H,
+        tid // W,
+        jnp.where(
+            local < region0,
+            local // W,
+            jnp.where(local < region1, dy + side // (2 * dx), (H - dy) + top // W),
+        ),
+    )
+    texel = jnp.stack([jnp.where(valid, x, 0), jnp.where(valid, y, 0)], axis=-1)
+    return texel, jnp.where(valid, level, 0), valid
