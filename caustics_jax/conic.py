@@ -180,3 +180,31 @@ def edge_intersection_points(t: Float[Array, "*batch 3 2"]) -> Float[Array, "*ba
     """Barycentric `(a, b)` of each edge root returned by `edge_intersections`."""
     edge = jnp.arange(3)[:, None]
     return edge_barycentric(jnp.broadcast_to(edge, t.shape), t)
+
+
+def conic_second_intersection(
+    coef: Float[Array, "*batch 6"], ab0: Float[Array, "*batch 2"], d: Float[Array, "*batch 2"]
+) -> tuple[Float[Array, "*batch 2"], Bool[Array, "*batch"]]:
+    """Second point where the line `ab0 + s d` meets the conic, for `ab0` on the conic.
+
+    Every line through a point of a conic meets it in exactly one other point, so the
+    pencil of lines through `ab0` parametrises the whole curve by the line's angle; the
+    walk bisects along the curve with it (seed 001 §3.4.3 "split the triangle so the new
+    edge cuts the curve", here with the cutting line through a known curve point).
+    `Q(ab0 + s d) = Q0 + s (grad . d) + s^2 (d^T S2 d)`; of its two roots the one of larger
+    magnitude is the new point (the other is the anchor, `s ~ 0`). Invalid when the line
+    is parallel to an asymptote (the point is at infinity).
+    """
+    A, B, C, D, E, F = jnp.moveaxis(coef, -1, 0)
+    a, b = ab0[..., 0], ab0[..., 1]
+    da, db = d[..., 0], d[..., 1]
+    q2 = A * da * da + B * db * db + C * da * db
+    grad_a = 2 * A * a + C * b + D
+    grad_b = 2 * B * b + C * a + E
+    q1 = grad_a * da + grad_b * db
+    q0 = conic_value(coef, ab0)
+    s, valid = solve_quadratic(q2, q1, q0)
+    both = valid[..., 0] & valid[..., 1]
+    far = jnp.where(both & (jnp.abs(s[..., 0]) > jnp.abs(s[..., 1])), s[..., 0], s[..., 1])
+    ok = both  # a single (linear or tangent) root is the anchor itself
+    return ab0 + jnp.where(ok, far, 0)[..., None] * d, ok

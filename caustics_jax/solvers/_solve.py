@@ -1,0 +1,112 @@
+"""`solve`: validate at the boundary, find start points, run the chosen solver jitted."""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..barycentric import barycentric_point
+from ..mesh import SurfaceMesh
+from ..start_points import start_points
+from ._solution import Solution, Status
+from .walk import WalkOptions, walk_lane
+
+METHODS = ("walk", "newton", "exhaustive")
+
+
+def _validate(mesh, P, L, eta, method):
+    if not isinstance(mesh, SurfaceMesh):
+        raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    dtype = mesh.dtype
+    out = []
+    for name, X in (("P", P), ("L", L)):
+        X = np.asarray(X)
+        if X.ndim == 0 or X.shape[-1] != 3:
+            raise ValueError(f"{name} must have shape (N, 3) (or broadcast to it), got {X.shape}")
+        if not np.issubdtype(X.dtype, np.number):
+            raise ValueError(f"{name} must be numeric, got dtype {X.dtype}")
+        bad = ~np.all(np.isfinite(X), axis=-1)
+        if np.any(bad):
+            raise ValueError(f"{name} has NaN or Inf coordinates at rows {np.nonzero(bad.reshape(-1))[0][:10].tolist()}")
+        out.append(X)
+    try:
+        P, L = np.broadcast_arrays(out[0].reshape(-1, 3) if out[0].ndim == 1 else out[0],
+                                   out[1].reshape(-1, 3) if out[1].ndim == 1 else out[1])
+    except ValueError as exc:
+        raise ValueError(f"P {out[0].shape} and L {out[1].shape} do not broadcast") from exc
+    if P.ndim != 2:
+        raise ValueError(f"P and L must broadcast to (N, 3), got {P.shape}")
+    eta_f = float(eta)
+    if not np.isfinite(eta_f) or eta_f <= 0:
+        raise ValueError(f"eta must be a finite positive index ratio, got {eta}")
+    return jnp.asarray(P, dtype), jnp.asarray(L, dtype), eta_f
+
+
+@functools.partial(jax.jit, static_argnames=("options",))
+def _walk_batch(mesh, P, L, face, ab0, found, eta, options: WalkOptions) -> Solution:
+    eta = jnp.asarray(eta, mesh.dtype)
+    states = jax.vmap(lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options))(
+        P, L, face, ab0, found)
+    V, N = mesh.triangle(states.face)
+    from ..objectives import signed_sine
+
+    residual = signed_sine(V, N, P, L, states.best_ab, eta)
+    status = states.status
+    found_out = status == Status.FOUND
+    V0, _ = mesh.triangle(face)
+    return Solution(
+        point=jnp.where(found[:, None], barycentric_point(V, states.best_ab), 0),
+        triangle=jnp.where(found, states.face, -1),
+        barycentric=jnp.where(found[:, None], states.best_ab, 0),
+        found=found_out,
+        status=status,
+        iterations=states.steps,
+        residual=jnp.where(found, residual, 0),
+        crossed=states.crossed,
+        start_point=jnp.where(found[:, None], barycentric_point(V0, ab0), 0),
+    )
+
+
+def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", start=None,
+          **options) -> Solution:
+    """Find refraction points `M` of paths `P -> M -> L` through the surface (seed 001 §3.4).
+
+    Args:
+        mesh: the refractive surface (`SurfaceMesh`), normals outward toward the light.
+        P: `(N, 3)` receivers inside the medium (cast to the mesh's dtype).
+        L: `(N, 3)` light positions (or one `(3,)` broadcast to all).
+        eta: `eta_in / eta_out` (water 1.333).
+        method: "walk" (seed 001 curve walk), "newton" (optimistix baselines) or
+            "exhaustive" (all solutions, reference).
+        start: optional precomputed `start_points(mesh, P, L)` result.
+        **options: per method; "walk": `tol`, `max_steps`, `bracket`, `ellipse_samples`
+            (`WalkOptions`).
+
+    Returns a `Solution`; `status` holds `Status` codes and `found` is True exactly where a
+    point with `|residual| <= tol` was returned. Bad input raises `ValueError` here,
+    before any jitted work.
+    """
+    P, L, eta = _validate(mesh, P, L, eta, method)
+    if method == "walk":
+        try:
+            opts = WalkOptions(**options)
+        except TypeError as exc:
+            raise ValueError(f"unknown walk option: {exc}") from exc
+        if opts.bracket not in ("illinois", "bisection"):
+            raise ValueError(f"bracket must be 'illinois' or 'bisection', got {opts.bracket!r}")
+        if opts.max_steps < 1 or opts.ellipse_samples < 2:
+            raise ValueError("max_steps must be >= 1 and ellipse_samples >= 2")
+        face, ab0, found = start if start is not None else start_points(mesh, P, L)
+        return _walk_batch(mesh, P, L, face, ab0, found, eta, opts)
+    if method == "newton":
+        from .newton import solve_newton
+
+        return solve_newton(mesh, P, L, eta, start=start, **options)
+    from .exhaustive import solve_exhaustive
+
+    return solve_exhaustive(mesh, P, L, eta, start=start, **options)

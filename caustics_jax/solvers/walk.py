@@ -1,0 +1,336 @@
+"""The curve walk of seed 001 §3.4: follow the coplanarity conic from `M0` to a zero of `f`.
+
+Per lane, from the start point `M0` (on the conic by construction, §3.4.2):
+
+1. First triangle: the conic's tangent at `M0` gives two directions of travel. For each,
+   the next edge crossing along the curve is found exactly with the pencil of lines
+   through the current curve point (`conic_second_intersection`): every point of a conic
+   is hit by exactly one line through a given curve point, and the line angle `phi`
+   increases monotonically along the curve, so the first crossing in the direction of
+   travel is the edge root of smallest `phi`. This also settles the four-intersection
+   re-entry case of Fig. 5c without a heuristic. If `f` changes sign between `M0` and a
+   crossing, refine there; otherwise walk towards the crossing of smaller `|f|`. With no
+   edge crossing at all the curve is an ellipse inside the triangle (§3.4.4): sample it
+   through the pencil and bracket a sign change.
+2. Walk (§3.4.3): cross the exit edge into the neighbour (adjacency buffer), orient the
+   tangent inward, find the next crossing along the curve, evaluate `f`; cross again
+   while `f` keeps its sign.
+3. Refine ("dichotomy"): the sign change lies on the arc between the entry point and the
+   exit; cut the arc by lines through the entry point at angle `phi` (the paper splits
+   the triangle so that the new edge cuts the curve; a line through a known curve point
+   cuts it exactly once more) and bisect `phi`, or use Illinois false position on `phi`
+   (`bracket="illinois"`, the default, same guarantees, fewer steps).
+
+A lane is `FOUND` exactly when `|f| <= tol` at the returned point (`f` = sine of the
+angle between the refracted direction and `w_L`, so `tol` bounds the angle error).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..conic import (
+    conic_coefficients,
+    conic_second_intersection,
+    conic_tangent,
+    conic_value,
+    edge_intersection_points,
+    edge_intersections,
+    solve_quadratic,
+)
+from ..mesh import SurfaceMesh, cross_edge
+from ..objectives import ObjectiveStatus, signed_sine_and_status
+from ._solution import Status
+
+WALK, BISECT, DONE = 0, 1, 2
+# Inward normal of each edge in barycentric space: b = 0 -> +b, a + b = 1 -> -(a + b), a = 0 -> +a.
+_INWARD = ((0.0, 1.0), (-1.0, -1.0), (1.0, 0.0))
+
+
+class WalkOptions(NamedTuple):
+    """Static options of the walk (hashable).
+
+    tol: accept a point when `|f| <= tol` (None: 1e-10 in float64, 1e-5 in float32, from
+        the float32 audit's 1e-6 noise floor of `f`).
+    max_steps: cap on crossings plus refinement steps per lane.
+    bracket: "illinois" (false position with the Illinois fix) or "bisection" (the paper).
+    ellipse_samples: pencil samples of an ellipse inside the first triangle (§3.4.4).
+    """
+
+    tol: float | None = None
+    max_steps: int = 512
+    bracket: str = "illinois"
+    ellipse_samples: int = 32
+
+
+def default_tol(dtype) -> float:
+    return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
+
+
+class _State(NamedTuple):
+    mode: jax.Array
+    status: jax.Array
+    face: jax.Array
+    exit_k: jax.Array
+    exit_t: jax.Array
+    exit_ab: jax.Array
+    f_exit: jax.Array
+    anchor: jax.Array
+    tau: jax.Array
+    perp: jax.Array  # tau rotated +90 deg, times the bend sense sigma
+    phi_lo: jax.Array
+    phi_hi: jax.Array
+    f_lo: jax.Array
+    f_hi: jax.Array
+    side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
+    best_ab: jax.Array
+    best_f: jax.Array
+    steps: jax.Array
+    crossed: jax.Array
+
+
+def _frame(mesh, face, P, L):
+    V, N = mesh.triangle(face)
+    return V, N, conic_coefficients(V, N, P, L)
+
+
+def _orientation(coef, e, tau):
+    """Unit travel direction and `sigma`-signed normal, so curve points have `phi` in (0, pi)."""
+    tau = tau / jnp.maximum(jnp.linalg.norm(tau), jnp.finfo(tau.dtype).tiny)
+    A, B, C = coef[0], coef[1], coef[2]
+    t = conic_tangent(coef, e)
+    grad = jnp.stack([t[1], -t[0]])  # half the gradient (u, v)
+    c2 = A * tau[0] ** 2 + B * tau[1] ** 2 + C * tau[0] * tau[1]
+    bend = -jnp.sign(c2) * grad
+    cross = tau[0] * bend[1] - tau[1] * bend[0]
+    sigma = jnp.where(cross < 0, -1, 1).astype(tau.dtype)
+    perp = sigma * jnp.stack([-tau[1], tau[0]])
+    return tau, perp
+
+
+def _next_crossing(coef, e, tau, perp, exclude):
+    """The first edge root met when travelling along the conic from `e` in direction `tau`."""
+    t, valid = edge_intersections(coef)
+    ab = edge_intersection_points(t)  # (3, 2, 2)
+    v = ab - e
+    dist = jnp.linalg.norm(v, axis=-1)
+    cand = valid & (dist > exclude)
+    phi = jnp.arctan2(v @ perp, v @ tau)
+    phi = jnp.where(phi < 0, phi + jnp.pi, phi)
+    phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
+    i = jnp.argmin(phi)
+    return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
+
+
+def _project_to_conic(coef, q):
+    """The conic point nearest `q` along the gradient direction at `q` (one exact line cut)."""
+    t = conic_tangent(coef, q)
+    n = jnp.stack([t[1], -t[0]])
+    n = n / jnp.maximum(jnp.linalg.norm(n), jnp.finfo(n.dtype).tiny)
+    A, B, C, D, E, F = coef
+    q2 = A * n[0] ** 2 + B * n[1] ** 2 + C * n[0] * n[1]
+    q1 = (2 * A * q[0] + C * q[1] + D) * n[0] + (2 * B * q[1] + C * q[0] + E) * n[1]
+    h, ok = solve_quadratic(q2, q1, conic_value(coef, q))
+    h = jnp.where(ok, h, jnp.inf)
+    h_min = jnp.where(jnp.abs(h[0]) < jnp.abs(h[1]), h[0], h[1])
+    return q + jnp.where(jnp.isfinite(h_min), h_min, 0) * n
+
+
+def _pencil_point(coef, anchor, tau, perp, phi):
+    d = jnp.cos(phi) * tau + jnp.sin(phi) * perp
+    return conic_second_intersection(coef, anchor, d)
+
+
+def _f(V, N, P, L, ab, eta):
+    return signed_sine_and_status(V, N, P, L, ab, eta)
+
+
+def _opposite(f1, f2):
+    return jnp.sign(f1) * jnp.sign(f2) < 0
+
+
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
+    """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status."""
+    dtype = mesh.dtype
+    V, N, coef = _frame(mesh, face, P, L)
+    f0, st0 = _f(V, N, P, L, ab0, eta)
+    t0 = conic_tangent(coef, ab0)
+    singular = jnp.linalg.norm(t0) == 0
+
+    # f's sign flips as M crosses the line PL, i.e. exactly at M0 (|f| is continuous; see
+    # tests/test_walk.py): the sign at M0 means nothing, so each direction starts its
+    # bracket at a curve point a barycentric distance delta off M0, far enough that the
+    # start point's rounding cannot put it back across the line PL.
+    delta0 = 1e-6 if jnp.dtype(dtype) == jnp.float64 else 1e-3
+    dirs = []
+    for s in (1.0, -1.0):
+        tau, perp = _orientation(coef, ab0, s * t0)
+        ok, k, t, ab, phi = _next_crossing(coef, ab0, tau, perp, exclude)
+        fx, stx = _f(V, N, P, L, ab, eta)
+        delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * jnp.linalg.norm(ab - ab0)), delta0)
+        near = _project_to_conic(coef, ab0 + delta * tau)
+        v = near - ab0
+        phi_s = jnp.arctan2(v @ perp, v @ tau)
+        phi_s = jnp.clip(phi_s, 0, jnp.where(ok, phi / 2, jnp.pi / 2))
+        fs, _ = _f(V, N, P, L, near, eta)
+        dirs.append((ok, k, t, ab, phi, fx, stx, tau, perp, phi_s, fs))
+    (okp, kp, tp, abp, phip, fp, stp, taup, perpp, phisp, fsp) = dirs[0]
+    (okm, km, tm, abm, phim, fm, stm, taum, perpm, phism, fsm) = dirs[1]
+
+    br_p = okp & _opposite(fsp, fp) & (stp == ObjectiveStatus.OK)
+    br_m = okm & _opposite(fsm, fm) & (stm == ObjectiveStatus.OK)
+    use_m_bracket = br_m & (~br_p | (phim < phip))
+    walk_m = okm & (~okp | (jnp.abs(fm) < jnp.abs(fp)))
+
+    # Ellipse inside the triangle: sample the whole curve through the pencil at M0.
+    tau_e, perp_e = _orientation(coef, ab0, t0)
+    phis = jnp.pi * jnp.arange(1, n_ellipse, dtype=dtype) / n_ellipse
+    pts, pts_ok = jax.vmap(lambda p: _pencil_point(coef, ab0, tau_e, perp_e, p))(phis)
+    fs, sts = jax.vmap(lambda ab: _f(V, N, P, L, ab, eta))(pts)
+    phis_all, fs_all, ok_all = phis, fs, pts_ok & (sts == ObjectiveStatus.OK)
+    change = _opposite(fs_all[:-1], fs_all[1:]) & ok_all[:-1] & ok_all[1:]
+    j = jnp.argmax(change)
+    ellipse_bracket = change[j]
+
+    is_ellipse = ~okp & ~okm
+    bracket = jnp.where(is_ellipse, ellipse_bracket, br_p | br_m)
+    tau = jnp.where(is_ellipse, tau_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), taum, taup))
+    perp = jnp.where(is_ellipse, perp_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), perpm, perpp))
+    phi_lo = jnp.where(is_ellipse, phis_all[j], jnp.where(use_m_bracket, phism, phisp))
+    phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m_bracket, phim, phip))
+    f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m_bracket, fsm, fsp))
+    f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m_bracket, fm, fp))
+
+    pick_m = walk_m
+    exit_k = jnp.where(pick_m, km, kp)
+    exit_t = jnp.where(pick_m, tm, tp)
+    exit_ab = jnp.where(pick_m, abm, abp)
+    f_exit = jnp.where(pick_m, fm, fp)
+    st_exit = jnp.where(pick_m, stm, stp)
+
+    status = jnp.asarray(Status.FOUND, jnp.int32)
+    mode = jnp.where(bracket, BISECT, WALK)
+    status = jnp.where(~bracket & (st_exit == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION),
+                       Status.TOTAL_INTERNAL_REFLECTION, status)
+    mode = jnp.where(~bracket & (st_exit != ObjectiveStatus.OK), DONE, mode)
+    mode = jnp.where(is_ellipse & ~ellipse_bracket, DONE, mode)
+    status = jnp.where(is_ellipse & ~ellipse_bracket, Status.UNRESOLVED_ELLIPSE, status)
+    mode = jnp.where(jnp.abs(f0) <= tol, DONE, mode)  # M0 itself is a solution
+    status = jnp.where(jnp.abs(f0) <= tol, Status.FOUND, status)
+    # Terminal conditions that override everything else, most specific last.
+    tir0 = st0 == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+    mode = jnp.where(tir0, DONE, mode)
+    status = jnp.where(tir0, Status.TOTAL_INTERNAL_REFLECTION, status)
+    degenerate = singular | (st0 == ObjectiveStatus.DEGENERATE)
+    mode = jnp.where(degenerate, DONE, mode)
+    status = jnp.where(degenerate, Status.DEGENERATE, status)
+    mode = jnp.where(found, mode, DONE)
+    status = jnp.where(found, status, Status.NO_CROSSING)
+
+    return _State(
+        mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
+        exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
+        anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
+        side=jnp.asarray(0, jnp.int32), best_ab=ab0,
+        best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
+    )
+
+
+def _walk_step(mesh, P, L, eta, tol, exclude, s: _State) -> _State:
+    g, k_in, _, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
+    left = g < 0
+    V, N, coef = _frame(mesh, g, P, L)
+    t = conic_tangent(coef, e)
+    inward = jnp.asarray(_INWARD, t.dtype)[jnp.clip(k_in, 0, 2)]
+    side = t @ inward
+    tau, perp = _orientation(coef, e, jnp.where(side < 0, -t, t))
+    f_e, st_e = _f(V, N, P, L, e, eta)
+    ok, k, tt, ab, phi = _next_crossing(coef, e, tau, perp, exclude)
+    fx, stx = _f(V, N, P, L, ab, eta)
+
+    found_e = jnp.abs(f_e) <= tol
+    found_x = ok & (jnp.abs(fx) <= tol) & (stx == ObjectiveStatus.OK)
+    bracket = ok & _opposite(f_e, fx) & (stx == ObjectiveStatus.OK)
+    lost = ~ok | (side == 0)
+    tir = stx == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+
+    status, mode = s.status, jnp.where(bracket, BISECT, WALK)
+    for cond, code in ((tir, Status.TOTAL_INTERNAL_REFLECTION), (lost, Status.LOST_CURVE),
+                       (found_x, Status.FOUND), (found_e, Status.FOUND), (left, Status.LEFT_MESH)):
+        mode = jnp.where(cond, DONE, mode)
+        status = jnp.where(cond, code, status)
+    best_ab = jnp.where(found_x & ~found_e, ab, e)
+    best_f = jnp.where(found_x & ~found_e, fx, f_e)
+    face = jnp.where(left, s.face, g)
+    best_ab = jnp.where(left, s.exit_ab, best_ab)
+    best_f = jnp.where(left, s.f_exit, best_f)
+    return s._replace(
+        mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face,
+        exit_k=k, exit_t=tt, exit_ab=ab, f_exit=fx, anchor=e, tau=tau, perp=perp,
+        phi_lo=jnp.zeros_like(phi), phi_hi=phi, f_lo=f_e, f_hi=fx, side=jnp.zeros_like(s.side),
+        best_ab=best_ab, best_f=best_f, steps=s.steps + 1, crossed=s.crossed + jnp.where(left, 0, 1),
+    )
+
+
+def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
+    V, N, coef = _frame(mesh, s.face, P, L)
+    mid = (s.phi_lo + s.phi_hi) / 2
+    if illinois:
+        denom = s.f_hi - s.f_lo
+        fp = s.phi_hi - s.f_hi * (s.phi_hi - s.phi_lo) / jnp.where(denom != 0, denom, 1)
+        width = s.phi_hi - s.phi_lo
+        inside = (denom != 0) & (fp > s.phi_lo + 1e-3 * width) & (fp < s.phi_hi - 1e-3 * width)
+        phi = jnp.where(inside, fp, mid)
+    else:
+        phi = mid
+    p, ok = _pencil_point(coef, s.anchor, s.tau, s.perp, phi)
+    fm, stm = _f(V, N, P, L, p, eta)
+    ok = ok & (stm == ObjectiveStatus.OK)
+    to_hi = _opposite(fm, s.f_lo)  # the root lies in [phi_lo, phi]: phi becomes the new hi
+    phi_lo = jnp.where(to_hi, s.phi_lo, phi)
+    phi_hi = jnp.where(to_hi, phi, s.phi_hi)
+    f_lo = jnp.where(to_hi, s.f_lo, fm)
+    f_hi = jnp.where(to_hi, fm, s.f_hi)
+    if illinois:  # halve the stale end's value when the same end is kept twice
+        side = jnp.where(to_hi, 1, -1)
+        f_lo = jnp.where(to_hi & (s.side == 1), f_lo / 2, f_lo)
+        f_hi = jnp.where(~to_hi & (s.side == -1), f_hi / 2, f_hi)
+    else:
+        side = s.side
+    found = ok & (jnp.abs(fm) <= tol)
+    stalled = (phi_hi - phi_lo) <= 4 * jnp.finfo(phi.dtype).eps * jnp.maximum(phi_hi, 1)
+    mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
+    status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
+    better = ok & (jnp.abs(fm) < jnp.abs(s.best_f))
+    return s._replace(
+        mode=mode.astype(jnp.int32), status=status.astype(jnp.int32),
+        phi_lo=jnp.where(ok, phi_lo, s.phi_lo), phi_hi=jnp.where(ok, phi_hi, s.phi_hi),
+        f_lo=jnp.where(ok, f_lo, s.f_lo), f_hi=jnp.where(ok, f_hi, s.f_hi),
+        side=jnp.asarray(side, jnp.int32),
+        best_ab=jnp.where(better | found, p, s.best_ab), best_f=jnp.where(better | found, fm, s.best_f),
+        steps=s.steps + 1,
+    )
+
+
+def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptions):
+    """Walk one lane (vmapped by `walk`); returns the final `_State`."""
+    dtype = mesh.dtype
+    tol = options.tol if options.tol is not None else default_tol(dtype)
+    exclude = 8 * float(np.sqrt(np.finfo(dtype).eps))
+    state = _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, options.ellipse_samples)
+    illinois = options.bracket == "illinois"
+
+    def body(s):
+        if_walk = _walk_step(mesh, P, L, eta, tol, exclude, s)
+        if_bisect = _bisect_step(mesh, P, L, eta, tol, illinois, s)
+        nxt = jax.tree.map(lambda w, b: jnp.where(s.mode == WALK, w, b), if_walk, if_bisect)
+        return jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
+
+    state = jax.lax.while_loop(
+        lambda s: (s.mode != DONE) & (s.steps < options.max_steps), body, state)
+    capped = state.mode != DONE
+    return state._replace(status=jnp.where(capped, Status.MAX_STEPS, state.status).astype(jnp.int32))
