@@ -154,8 +154,12 @@ def test_eq7_scale_conserves_flux_over_the_outermost_extent(dtype, W, H, s, N):
 
 @pytest.mark.parametrize("dtype", DTYPES)
 @given(
-    w=st.floats(1, 1e4), h=st.floats(1, 1e4), near=st.floats(0, 10), depth=st.floats(0.1, 1e3),
-    s=st.sampled_from([2, 3, 4]), level=st.integers(0, 4),
+    w=st.floats(1, 1e4),
+    h=st.floats(1, 1e4),
+    near=st.floats(0, 10),
+    depth=st.floats(0.1, 1e3),
+    s=st.sampled_from([2, 3, 4]),
+    level=st.integers(0, 4),
 )
 def test_projection_maps_the_level_extent_to_the_clip_cube(dtype, w, h, near, depth, s, level):
     P = np.asarray(cascade_projection(w, h, near, near + depth, s, level, dtype))
@@ -187,7 +191,13 @@ def test_light_position_lies_behind_the_eye_by_near_plus_far(dtype, seed):
 
 def test_ccm0_size_thresholds_and_bad_configurations_raise():
     assert [ccm0_size(r, r, 1.0) for r in (255, 256, 511, 512, 1023, 1024, 5000)] == [
-        256, 512, 512, 1024, 1024, 2048, 2048,
+        256,
+        512,
+        512,
+        1024,
+        1024,
+        2048,
+        2048,
     ]
     with pytest.raises(ValueError):
         cascade_deltas(20, 20, 3)

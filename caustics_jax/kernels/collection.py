@@ -1,0 +1,252 @@
+"""Collection points of seed 000: radius, cylinder, reuse, resolve, temporal EMA (MATH.md §8).
+
+A collection point `c` holds a position `p`, unit normal `n`, radius `r`, material id
+`m`, camera throughput `tau` and accumulated radiant intensity `I`. Photons hitting the
+cylinder of radius `r` and height `r/10` around `p` (axis `n`) add to `I`; the resolve
+turns `I` into radiance; the temporal variant reuses the previous frame's points.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ..geometry import dot, safe_normalize
+from ._util import as_float, check, check_last_axis, float_dtype, safe_div, safe_sqrt
+
+#: Search radius cap of seed 000 §3.2 (5 mm, scene units in metres).
+RADIUS_CAP = 5e-3
+#: Cylinder height as a fraction of its radius (seed 000 §3: "a tenth of c.r").
+HEIGHT_FRACTION = 0.1
+#: Gaussian width of the reuse kernel relative to the radius (seed 000 §3.1, sigma = 3/4 r).
+SIGMA_FRACTION = 0.75
+#: Normal agreement threshold of the reuse test (seed 000 eq. 4).
+NORMAL_THRESHOLD = 0.9
+#: Weight of the reused history in the temporal EMA (seed 000 §3.1).
+EMA_ALPHA = 0.8
+# Grazing views make the footprint unbounded; below this cosine the cap decides anyway.
+_MIN_COS = 1e-6
+
+
+def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array, "*batch"]:
+    """Spread angle of a primary ray cone (Akenine-Möller et al. 2021 §2, RTG1 ch. 20 eq. 30).
+
+    `alpha = atan(2 tan(fov_y / 2) / H)`: the angle one pixel of a vertical field of view
+    `fov_y` (radians) over `H` pixels subtends at the eye.
+    """
+    check(fov_y, "fov_y", lower=0, strict=True)
+    check(height_px, "height_px", lower=0, strict=True)
+    fov_y = jnp.asarray(fov_y)
+    dtype = float_dtype(fov_y)
+    fov_y = fov_y.astype(dtype)
+    return jnp.arctan(2 * jnp.tan(fov_y / 2) / as_float(height_px, dtype))
+
+
+def ray_cone_propagate(
+    width: Float[Array, "*batch"],
+    spread: Float[Array, "*batch"],
+    t: Float[Array, "*batch"],
+    surface_spread=0.0,
+    roughness_spread=0.0,
+) -> tuple[Float[Array, "*batch"], Float[Array, "*batch"]]:
+    """Ray cone after travelling `t` and scattering (Akenine-Möller et al. 2021 §2, §4).
+
+    Width `W' = W + 2 t tan(gamma / 2)` (the exact cone; the paper's erratum puts the
+    `/2` in) and spread `gamma' = gamma + beta_surface + beta_roughness`. The surface
+    term comes from curvature; the roughness term widens the cone for glossy BSDFs
+    (their §4). Both are angles supplied by the caller: the mapping from a BSDF
+    roughness to an angle is the renderer's, not part of seed 000.
+    """
+    check(width, "width", lower=0)
+    check(t, "t", lower=0)
+    check(roughness_spread, "roughness_spread", lower=0)
+    dtype = float_dtype(width, spread, t)
+    width, spread, t = (jnp.asarray(a, dtype) for a in (width, spread, t))
+    new_width = width + 2 * t * jnp.tan(spread / 2)
+    new_spread = spread + as_float(surface_spread, dtype) + as_float(roughness_spread, dtype)
+    return new_width, new_spread
+
+
+def ray_cone_radius(width: Float[Array, "*batch"], cap=RADIUS_CAP) -> Float[Array, "*batch"]:
+    """Collection radius at a secondary hit: half the ray-cone width, capped (seed 000 §3)."""
+    check(width, "width", lower=0)
+    check(cap, "cap", lower=0, strict=True)
+    width = jnp.asarray(width)
+    dtype = float_dtype(width)
+    return jnp.minimum(width.astype(dtype) / 2, as_float(cap, dtype))
+
+
+def pixel_footprint_radius(
+    t: Float[Array, "*batch"],
+    spread: Float[Array, "*batch"],
+    cos_theta: Float[Array, "*batch"],
+    cap=RADIUS_CAP,
+) -> Float[Array, "*batch"]:
+    """Radius of the disk enclosing a pixel's footprint at a primary hit, capped (seed 000 §3).
+
+    A pixel of angular size `spread` seen at distance `t` covers a square of side
+    `s = 2 t tan(spread / 2)` across the ray; on a surface whose normal makes angle
+    `theta` with the ray it stretches to `s x s / |cos theta|`. The enclosing disk is its
+    half-diagonal `(s / 2) sqrt(1 + 1 / cos^2 theta)`, then capped at `cap` (5 mm).
+    """
+    check(t, "t", lower=0)
+    check(spread, "spread", lower=0)
+    check(cap, "cap", lower=0, strict=True)
+    dtype = float_dtype(t, spread, cos_theta)
+    t, spread, cos_theta = (jnp.asarray(a, dtype) for a in (t, spread, cos_theta))
+    c = jnp.maximum(jnp.abs(cos_theta), as_float(_MIN_COS, dtype))
+    half_side = t * jnp.tan(spread / 2)
+    r = half_side * jnp.sqrt(1 + c * c) / c
+    return jnp.minimum(r, as_float(cap, dtype))
+
+
+def cylinder_aabb(
+    center: Float[Array, "*batch 3"],
+    normal: Float[Array, "*batch 3"],
+    radius: Float[Array, "*batch"],
+) -> tuple[Float[Array, "*batch 3"], Float[Array, "*batch 3"]]:
+    """Tight AABB `(lo, hi)` of the collection cylinder (seed 000 §3; MATH.md §8).
+
+    Cylinder of radius `r`, height `h = r / 10`, axis `n` (normalised here), centred on
+    `center`. The disk of radius `r` spans `r sqrt(1 - n_i^2)` on axis `i` and the axis
+    segment `(h / 2) |n_i|`, so the half-extent is their sum.
+    """
+    check_last_axis(center, "center", 3)
+    check_last_axis(normal, "normal", 3)
+    check(radius, "radius", lower=0)
+    dtype = float_dtype(center, normal, radius)
+    center = jnp.asarray(center, dtype)
+    n = safe_normalize(jnp.asarray(normal, dtype))
+    r = jnp.asarray(radius, dtype)[..., None]
+    h = r * as_float(HEIGHT_FRACTION, dtype)
+    half = r * safe_sqrt((1 - n) * (1 + n)) + (h / 2) * jnp.abs(n)
+    return center - half, center + half
+
+
+def in_cylinder(
+    point: Float[Array, "*batch 3"],
+    center: Float[Array, "*batch 3"],
+    normal: Float[Array, "*batch 3"],
+    radius: Float[Array, "*batch"],
+) -> Bool[Array, "*batch"]:
+    """Whether `point` lies in the collection cylinder (seed 000 §3, "located within")."""
+    check_last_axis(point, "point", 3)
+    check(radius, "radius", lower=0)
+    dtype = float_dtype(point, center, normal, radius)
+    d = jnp.asarray(point, dtype) - jnp.asarray(center, dtype)
+    n = safe_normalize(jnp.asarray(normal, dtype))
+    r = jnp.asarray(radius, dtype)
+    axial = dot(d, n)
+    radial2 = dot(d, d) - axial * axial
+    return (jnp.abs(axial) <= r * as_float(HEIGHT_FRACTION / 2, dtype)) & (radial2 <= r * r)
+
+
+def reuse_accepted(
+    p_prev: Float[Array, "*batch 3"],
+    n_prev: Float[Array, "*batch 3"],
+    m_prev: Int[Array, "*batch"],
+    p: Float[Array, "*batch 3"],
+    n: Float[Array, "*batch 3"],
+    m: Int[Array, "*batch"],
+    r: Float[Array, "*batch"],
+) -> Bool[Array, "*batch"]:
+    """Reuse acceptance test (seed 000 eq. 4).
+
+    `|p_prev - p| <= r` (the current point's radius), `n_prev . n >= 0.9`, same material.
+    """
+    check_last_axis(p, "p", 3)
+    check_last_axis(p_prev, "p_prev", 3)
+    check(r, "r", lower=0)
+    dtype = float_dtype(p_prev, n_prev, p, n, r)
+    d = jnp.asarray(p_prev, dtype) - jnp.asarray(p, dtype)
+    r = jnp.asarray(r, dtype)
+    close = dot(d, d) <= r * r
+    aligned = dot(jnp.asarray(n_prev, dtype), jnp.asarray(n, dtype)) >= as_float(
+        NORMAL_THRESHOLD, dtype
+    )
+    return close & aligned & (jnp.asarray(m_prev) == jnp.asarray(m))
+
+
+def reuse_weight(
+    p_prev: Float[Array, "*batch 3"], p: Float[Array, "*batch 3"], r: Float[Array, "*batch"]
+) -> Float[Array, "*batch"]:
+    """Gaussian reuse weight (seed 000 eq. 3) with `sigma = 0.75 r`.
+
+    `w = exp(-|p - p_prev|^2 / (2 sigma^2))`. At `r = 0` the kernel degenerates to a
+    delta: weight 1 at coincident points, else 0.
+    """
+    check_last_axis(p, "p", 3)
+    check(r, "r", lower=0)
+    dtype = float_dtype(p_prev, p, r)
+    d = jnp.asarray(p_prev, dtype) - jnp.asarray(p, dtype)
+    d2 = dot(d, d)
+    sigma = as_float(SIGMA_FRACTION, dtype) * jnp.asarray(r, dtype)
+    two_sigma2 = 2 * sigma * sigma
+    ok = two_sigma2 > 0
+    w = jnp.exp(-d2 / jnp.where(ok, two_sigma2, 1))
+    return jnp.where(ok, w, jnp.where(d2 == 0, 1, 0).astype(dtype))
+
+
+def resolve(tau, intensity, r: Float[Array, "*batch"]):
+    """Resolve accumulated intensity to radiance (seed 000 eq. 1): `L_o = tau I / (pi r^2)`.
+
+    `tau` and `intensity` broadcast against `r` (add a trailing axis to `r` for RGB). A
+    point with `r = 0` gathered nothing and resolves to 0.
+    """
+    check(r, "r", lower=0)
+    dtype = float_dtype(tau, intensity, r)
+    r = jnp.asarray(r, dtype)
+    area = as_float(jnp.pi, dtype) * r * r
+    return safe_div(jnp.asarray(tau, dtype) * jnp.asarray(intensity, dtype), area)
+
+
+def temporal_ema(L_hat, L, alpha=EMA_ALPHA):
+    """Temporal exponential moving average (seed 000 eq. 2): `alpha L_hat + (1 - alpha) L`.
+
+    `L_hat` is the radiance gathered from the previous frame, `L` this frame's resolve;
+    the paper uses `alpha = 0.8`.
+    """
+    check(alpha, "alpha", lower=0, upper=1)
+    dtype = float_dtype(L_hat, L)
+    alpha = as_float(alpha, dtype)
+    return alpha * jnp.asarray(L_hat, dtype) + (1 - alpha) * jnp.asarray(L, dtype)
+
+
+def gather_previous(
+    p: Float[Array, "n 3"],
+    n: Float[Array, "n 3"],
+    m: Int[Array, " n"],
+    r: Float[Array, " n"],
+    p_prev: Float[Array, "k 3"],
+    n_prev: Float[Array, "k 3"],
+    m_prev: Int[Array, " k"],
+    r_prev: Float[Array, " k"],
+    L_prev: Float[Array, " k *channels"],
+) -> tuple[Float[Array, " n *channels"], Float[Array, " n"]]:
+    """Reference gather of last frame's radiance onto current points (seed 000 §3.1, eq. 3-4).
+
+    Dense all-pairs version of the BVH query: a previous point contributes to the current
+    point `c` when `c.p` lies in its cylinder (the "containing" query) and eq. 4 holds;
+    its interpolated radiance `L_prev` enters with the weight of eq. 3. Returns
+    `(L_hat, weight_sum)`. The paper says the weighted radiances are "accumulated"; we
+    normalise by the weight sum, the reading under which a constant field stays constant
+    (a raw sum would brighten wherever previous points overlap). `L_hat = 0` where
+    nothing was accepted (`weight_sum = 0`).
+    """
+    for name, a, k in (("p", p, 3), ("n", n, 3), ("p_prev", p_prev, 3), ("n_prev", n_prev, 3)):
+        check_last_axis(a, name, k)
+    if jnp.shape(L_prev)[:1] != jnp.shape(p_prev)[:1]:
+        raise ValueError(f"L_prev leading axis {jnp.shape(L_prev)} != p_prev {jnp.shape(p_prev)}")
+    dtype = float_dtype(p, n, r, p_prev, n_prev, r_prev, L_prev)
+    cur = lambda a: jnp.asarray(a)[:, None]  # noqa: E731  (current points along axis 0)
+    prev = lambda a: jnp.asarray(a)[None, :]  # noqa: E731
+    accepted = reuse_accepted(
+        prev(p_prev), prev(n_prev), prev(m_prev), cur(p), cur(n), cur(m), cur(r)
+    )
+    contained = in_cylinder(cur(p), prev(p_prev), prev(n_prev), prev(r_prev))
+    w = jnp.where(accepted & contained, reuse_weight(prev(p_prev), cur(p), cur(r)), 0).astype(dtype)
+    L_prev = jnp.asarray(L_prev, dtype)
+    weighted = jnp.tensordot(w, L_prev, axes=(1, 0))
+    weight_sum = jnp.sum(w, axis=1)
+    extra = (None,) * (L_prev.ndim - 1)
+    return safe_div(weighted, weight_sum[(..., *extra)]), weight_sum
