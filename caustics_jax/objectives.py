@@ -47,19 +47,42 @@ def signed_sine_and_status(
     L: Float[Array, "*batch 3"],
     ab: Float[Array, "*batch 2"],
     eta,
+    orientation: str = "tangent",
 ) -> tuple[Float[Array, "*batch"], Int[Array, "*batch"]]:
     """Signed sine `f` (seed 001 eq. 19-21) and an `ObjectiveStatus` per lane.
 
-    `f = s |r x w_L|` with `r = refract(-w_P, -n_s, eta)` and
-    `s = sign(t_world . (r x w_L))`, `t_world` the conic tangent (eq. 13-15) mapped to
-    world space. Under total internal reflection `r = 0` and the formula gives `f = 0`,
-    which is *not* a solution: the status says so, and solvers must read it.
+    `f = s |r x w_L|` with `r = refract(-w_P, -n_s, eta)`. `orientation` picks `s`:
+
+    - `"tangent"` (the paper's eq. 21): `s = sign(t_world . (r x w_L))`, `t_world` the
+      conic tangent (eq. 13-15) in world space. Ill-conditioned: `r`, `w_L` and the
+      tangent all lie (nearly) in the plane through `P`, `L`, `M`, so `t . (r x w_L)` is
+      proportional to how fast that plane turns along the curve; it is exactly 0 on a
+      flat surface, and in float32 its sign is rounding noise on gentle waves
+      (`tests/test_objectives.py` shows both).
+    - `"plane"`: `s = sign((c . m) (m . (PL x t_world)))` with `c = r x w_L` and the
+      plane normal `m = PL x PM`. On the curve `c` is parallel to `m`, so `sign(c . m)`
+      is as well-conditioned as `|c|`; it flips where `M` crosses the line `PL` (at
+      `M0`), and so does `sign(m . (PL x t))`, so their product is continuous there.
+      The result is a sign that is exact away from rounding distance of the line `PL`,
+      continuous along the curve, and differs from the paper's by a factor that is
+      constant along any stretch where the paper's is well defined. The solvers use it.
+
+    Under total internal reflection `r = 0` and the formula gives `f = 0`, which is *not*
+    a solution: the status says so, and solvers must read it.
     """
-    _, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
+    M, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
     r = refract(-w_P, -n_s, eta)
     c = jnp.cross(r, w_L)
-    t_world = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
-    s = jnp.where(dot(t_world, c) >= 0, 1, -1).astype(c.dtype)
+    if orientation == "tangent":
+        ref = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
+        s = jnp.where(dot(ref, c) >= 0, 1, -1).astype(c.dtype)
+    elif orientation == "plane":
+        t_world = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
+        m = jnp.cross(L - P, M - P)
+        flip = dot(m, jnp.cross(L - P, t_world))
+        s = jnp.where((dot(c, m) >= 0) == (flip >= 0), 1, -1).astype(c.dtype)
+    else:
+        raise ValueError(f"orientation must be 'tangent' or 'plane', got {orientation!r}")
     f = s * norm(c)
     tir = dot(r, r) == 0
     status = jnp.where(
@@ -70,13 +93,13 @@ def signed_sine_and_status(
     return jnp.where(degenerate, 0, f), status
 
 
-def signed_sine(V, N, P, L, ab, eta) -> Float[Array, "*batch"]:
+def signed_sine(V, N, P, L, ab, eta, orientation: str = "tangent") -> Float[Array, "*batch"]:
     """Signed sine `f` of seed 001 eq. 19-21 (see `signed_sine_and_status`).
 
     `f = 0` exactly on refracted paths, and also (spuriously) under total internal
     reflection; use `signed_sine_and_status` wherever that matters.
     """
-    return signed_sine_and_status(V, N, P, L, ab, eta)[0]
+    return signed_sine_and_status(V, N, P, L, ab, eta, orientation)[0]
 
 
 def orthonormal_frame(n: Float[Array, "*batch 3"]):

@@ -55,7 +55,7 @@ def _walk_batch(mesh, P, L, face, ab0, found, eta, options: WalkOptions) -> Solu
     V, N = mesh.triangle(states.face)
     from ..objectives import signed_sine
 
-    residual = signed_sine(V, N, P, L, states.best_ab, eta)
+    residual = signed_sine(V, N, P, L, states.best_ab, eta, orientation="plane")
     status = states.status
     found_out = status == Status.FOUND
     V0, _ = mesh.triangle(face)

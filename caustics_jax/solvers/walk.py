@@ -86,6 +86,8 @@ class _State(NamedTuple):
     phi_hi: jax.Array
     f_lo: jax.Array
     f_hi: jax.Array
+    ab_lo: jax.Array  # bracket ends as points (for the chord fallback)
+    ab_hi: jax.Array
     side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
     best_ab: jax.Array
     best_f: jax.Array
@@ -146,7 +148,8 @@ def _pencil_point(coef, anchor, tau, perp, phi):
 
 
 def _f(V, N, P, L, ab, eta):
-    return signed_sine_and_status(V, N, P, L, ab, eta)
+    # The plane orientation: the paper's tangent sign is rounding noise on gentle waves.
+    return signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
 
 
 def _opposite(f1, f2):
@@ -161,25 +164,27 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
     t0 = conic_tangent(coef, ab0)
     singular = jnp.linalg.norm(t0) == 0
 
-    # f's sign flips as M crosses the line PL, i.e. exactly at M0 (|f| is continuous; see
-    # tests/test_walk.py): the sign at M0 means nothing, so each direction starts its
-    # bracket at a curve point a barycentric distance delta off M0, far enough that the
-    # start point's rounding cannot put it back across the line PL.
-    delta0 = 1e-6 if jnp.dtype(dtype) == jnp.float64 else 1e-3
+    # The paper's sign of f flips as M crosses the line PL, i.e. at M0; the "plane"
+    # orientation is continuous there but its sign is rounding noise within rounding
+    # distance of M0, so each direction starts its bracket a little off M0.
+    delta0 = 1e4 * float(np.finfo(dtype).eps)
     dirs = []
     for s in (1.0, -1.0):
         tau, perp = _orientation(coef, ab0, s * t0)
         ok, k, t, ab, phi = _next_crossing(coef, ab0, tau, perp, exclude)
         fx, stx = _f(V, N, P, L, ab, eta)
-        delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * jnp.linalg.norm(ab - ab0)), delta0)
+        room = jnp.linalg.norm(ab - ab0)
+        delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
         near = _project_to_conic(coef, ab0 + delta * tau)
         v = near - ab0
         phi_s = jnp.arctan2(v @ perp, v @ tau)
         phi_s = jnp.clip(phi_s, 0, jnp.where(ok, phi / 2, jnp.pi / 2))
         fs, _ = _f(V, N, P, L, near, eta)
-        dirs.append((ok, k, t, ab, phi, fx, stx, tau, perp, phi_s, fs))
-    (okp, kp, tp, abp, phip, fp, stp, taup, perpp, phisp, fsp) = dirs[0]
-    (okm, km, tm, abm, phim, fm, stm, taum, perpm, phism, fsm) = dirs[1]
+        # No room for a near point: f is continuous, so the exit's sign stands for the arc.
+        fs = jnp.where(ok & (room < 4 * delta0), fx, fs)
+        dirs.append((ok, k, t, ab, phi, fx, stx, tau, perp, phi_s, fs, near))
+    (okp, kp, tp, abp, phip, fp, stp, taup, perpp, phisp, fsp, nearp) = dirs[0]
+    (okm, km, tm, abm, phim, fm, stm, taum, perpm, phism, fsm, nearm) = dirs[1]
 
     br_p = okp & _opposite(fsp, fp) & (stp == ObjectiveStatus.OK)
     br_m = okm & _opposite(fsm, fm) & (stm == ObjectiveStatus.OK)
@@ -204,6 +209,8 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
     phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m_bracket, phim, phip))
     f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m_bracket, fsm, fsp))
     f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m_bracket, fm, fp))
+    ab_lo = jnp.where(is_ellipse, pts[j], jnp.where(use_m_bracket, nearm, nearp))
+    ab_hi = jnp.where(is_ellipse, pts[j + 1], jnp.where(use_m_bracket, abm, abp))
 
     pick_m = walk_m
     exit_k = jnp.where(pick_m, km, kp)
@@ -235,7 +242,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
         exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
         anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
-        side=jnp.asarray(0, jnp.int32), best_ab=ab0,
+        ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32), best_ab=ab0,
         best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
     )
 
@@ -271,28 +278,51 @@ def _walk_step(mesh, P, L, eta, tol, exclude, s: _State) -> _State:
     return s._replace(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face,
         exit_k=k, exit_t=tt, exit_ab=ab, f_exit=fx, anchor=e, tau=tau, perp=perp,
-        phi_lo=jnp.zeros_like(phi), phi_hi=phi, f_lo=f_e, f_hi=fx, side=jnp.zeros_like(s.side),
+        phi_lo=jnp.zeros_like(phi), phi_hi=phi, f_lo=f_e, f_hi=fx, ab_lo=e, ab_hi=ab,
+        side=jnp.zeros_like(s.side),
         best_ab=best_ab, best_f=best_f, steps=s.steps + 1, crossed=s.crossed + jnp.where(left, 0, 1),
     )
 
 
+def _chord_point(coef, ab_lo, ab_hi, lam):
+    """Curve point cut by the normal line at `lam` along the chord (well-conditioned on short arcs)."""
+    q = ab_lo + lam * (ab_hi - ab_lo)
+    p = _project_to_conic(coef, q)
+    chord = ab_hi - ab_lo
+    along = (p - ab_lo) @ chord
+    ok = (along > 0) & (along < chord @ chord) & (jnp.abs(conic_value(coef, p)) < jnp.inf)
+    return p, ok
+
+
 def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
+    """One refinement step on the arc between the bracket ends ("dichotomy", §3.4.3).
+
+    The arc is cut by the conic's normal line through the chord point at `lam` (midpoint,
+    or Illinois false position): well-conditioned on the nearly straight arcs of a fine
+    mesh. Where that cut leaves the bracket (a strongly curved arc, e.g. an ellipse), the
+    cut is the line through the anchor at the interpolated pencil angle `phi`, exact on
+    any arc but ill-conditioned in float32 when the whole arc spans a tiny angle.
+    """
     V, N, coef = _frame(mesh, s.face, P, L)
-    mid = (s.phi_lo + s.phi_hi) / 2
+    denom = s.f_hi - s.f_lo
+    lam = 0.5
     if illinois:
-        denom = s.f_hi - s.f_lo
-        fp = s.phi_hi - s.f_hi * (s.phi_hi - s.phi_lo) / jnp.where(denom != 0, denom, 1)
-        width = s.phi_hi - s.phi_lo
-        inside = (denom != 0) & (fp > s.phi_lo + 1e-3 * width) & (fp < s.phi_hi - 1e-3 * width)
-        phi = jnp.where(inside, fp, mid)
-    else:
-        phi = mid
-    p, ok = _pencil_point(coef, s.anchor, s.tau, s.perp, phi)
+        frac = -s.f_lo / jnp.where(denom != 0, denom, 1)  # false position, from the lo end
+        lam = jnp.where((denom != 0) & (frac > 1e-3) & (frac < 1 - 1e-3), frac, 0.5)
+    phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
+    p_pencil, ok_pencil = _pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
+    p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
+    p = jnp.where(ok_chord, p_chord, p_pencil)
+    ok = ok_pencil | ok_chord
+    v = p - s.anchor
+    phi = jnp.where(ok_chord, jnp.arctan2(v @ s.perp, v @ s.tau), phi_try)
     fm, stm = _f(V, N, P, L, p, eta)
     ok = ok & (stm == ObjectiveStatus.OK)
-    to_hi = _opposite(fm, s.f_lo)  # the root lies in [phi_lo, phi]: phi becomes the new hi
+    to_hi = _opposite(fm, s.f_lo)  # the root lies between lo and p: p becomes the new hi
     phi_lo = jnp.where(to_hi, s.phi_lo, phi)
     phi_hi = jnp.where(to_hi, phi, s.phi_hi)
+    ab_lo = jnp.where(to_hi, s.ab_lo, p)
+    ab_hi = jnp.where(to_hi, p, s.ab_hi)
     f_lo = jnp.where(to_hi, s.f_lo, fm)
     f_hi = jnp.where(to_hi, fm, s.f_hi)
     if illinois:  # halve the stale end's value when the same end is kept twice
@@ -302,14 +332,18 @@ def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     else:
         side = s.side
     found = ok & (jnp.abs(fm) <= tol)
-    stalled = (phi_hi - phi_lo) <= 4 * jnp.finfo(phi.dtype).eps * jnp.maximum(phi_hi, 1)
+    eps = jnp.finfo(p.dtype).eps
+    stalled = (jnp.linalg.norm(ab_hi - ab_lo) <= 4 * eps * jnp.maximum(jnp.linalg.norm(ab_hi), 1)) | (
+        jnp.abs(phi_hi - phi_lo) <= 4 * eps * jnp.maximum(jnp.abs(phi_hi), 1e-30))
     mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
     status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
     better = ok & (jnp.abs(fm) < jnp.abs(s.best_f))
+    keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
     return s._replace(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32),
-        phi_lo=jnp.where(ok, phi_lo, s.phi_lo), phi_hi=jnp.where(ok, phi_hi, s.phi_hi),
-        f_lo=jnp.where(ok, f_lo, s.f_lo), f_hi=jnp.where(ok, f_hi, s.f_hi),
+        phi_lo=keep(phi_lo, s.phi_lo), phi_hi=keep(phi_hi, s.phi_hi),
+        f_lo=keep(f_lo, s.f_lo), f_hi=keep(f_hi, s.f_hi),
+        ab_lo=keep(ab_lo, s.ab_lo), ab_hi=keep(ab_hi, s.ab_hi),
         side=jnp.asarray(side, jnp.int32),
         best_ab=jnp.where(better | found, p, s.best_ab), best_f=jnp.where(better | found, fm, s.best_f),
         steps=s.steps + 1,
