@@ -114,13 +114,23 @@ def _orientation(coef, e, tau):
     return tau, perp
 
 
-def _next_crossing(coef, e, tau, perp, exclude):
-    """The first edge root met when travelling along the conic from `e` in direction `tau`."""
+def _next_crossing(coef, e, tau, perp, entry_edge=-1, entry_t=0.0):
+    """The first edge root met when travelling along the conic from `e` in direction `tau`.
+
+    Excluded as candidates: roots within `64 eps` of `e` (a vertex root reported on two
+    edges), and on the entry edge the root nearest the entry parameter when it is within
+    `8 sqrt(eps)` of it (the entry point itself, recomputed in this triangle's conic).
+    """
     t, valid = edge_intersections(coef)
     ab = edge_intersection_points(t)  # (3, 2, 2)
+    eps = float(np.finfo(t.dtype).eps)
     v = ab - e
     dist = jnp.linalg.norm(v, axis=-1)
-    cand = valid & (dist > exclude)
+    cand = valid & (dist > 64 * eps)
+    on_entry = jnp.arange(3)[:, None] == entry_edge
+    gap = jnp.where(on_entry & valid, jnp.abs(t - entry_t), jnp.inf)
+    nearest = gap == jnp.min(gap)
+    cand = cand & ~(nearest & (gap < 8 * np.sqrt(eps)))
     phi = jnp.arctan2(v @ perp, v @ tau)
     phi = jnp.where(phi < 0, phi + jnp.pi, phi)
     phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
@@ -156,7 +166,7 @@ def _opposite(f1, f2):
     return jnp.sign(f1) * jnp.sign(f2) < 0
 
 
-def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status."""
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
@@ -171,7 +181,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
     dirs = []
     for s in (1.0, -1.0):
         tau, perp = _orientation(coef, ab0, s * t0)
-        ok, k, t, ab, phi = _next_crossing(coef, ab0, tau, perp, exclude)
+        ok, k, t, ab, phi = _next_crossing(coef, ab0, tau, perp)
         fx, stx = _f(V, N, P, L, ab, eta)
         room = jnp.linalg.norm(ab - ab0)
         delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
@@ -247,8 +257,8 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, n_ellipse):
     )
 
 
-def _walk_step(mesh, P, L, eta, tol, exclude, s: _State) -> _State:
-    g, k_in, _, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
+def _walk_step(mesh, P, L, eta, tol, s: _State) -> _State:
+    g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
     left = g < 0
     V, N, coef = _frame(mesh, g, P, L)
     t = conic_tangent(coef, e)
@@ -256,7 +266,7 @@ def _walk_step(mesh, P, L, eta, tol, exclude, s: _State) -> _State:
     side = t @ inward
     tau, perp = _orientation(coef, e, jnp.where(side < 0, -t, t))
     f_e, st_e = _f(V, N, P, L, e, eta)
-    ok, k, tt, ab, phi = _next_crossing(coef, e, tau, perp, exclude)
+    ok, k, tt, ab, phi = _next_crossing(coef, e, tau, perp, k_in, t_in)
     fx, stx = _f(V, N, P, L, ab, eta)
 
     found_e = jnp.abs(f_e) <= tol
@@ -308,7 +318,7 @@ def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     lam = 0.5
     if illinois:
         frac = -s.f_lo / jnp.where(denom != 0, denom, 1)  # false position, from the lo end
-        lam = jnp.where((denom != 0) & (frac > 1e-3) & (frac < 1 - 1e-3), frac, 0.5)
+        lam = jnp.where(denom != 0, jnp.clip(frac, 1e-6, 1 - 1e-6), 0.5)
     phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
     p_pencil, ok_pencil = _pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
@@ -354,12 +364,11 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptio
     """Walk one lane (vmapped by `walk`); returns the final `_State`."""
     dtype = mesh.dtype
     tol = options.tol if options.tol is not None else default_tol(dtype)
-    exclude = 8 * float(np.sqrt(np.finfo(dtype).eps))
-    state = _first_triangle(mesh, P, L, face, ab0, found, eta, tol, exclude, options.ellipse_samples)
+    state = _first_triangle(mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples)
     illinois = options.bracket == "illinois"
 
     def body(s):
-        if_walk = _walk_step(mesh, P, L, eta, tol, exclude, s)
+        if_walk = _walk_step(mesh, P, L, eta, tol, s)
         if_bisect = _bisect_step(mesh, P, L, eta, tol, illinois, s)
         nxt = jax.tree.map(lambda w, b: jnp.where(s.mode == WALK, w, b), if_walk, if_bisect)
         return jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
