@@ -75,7 +75,10 @@ def build_bvh(mesh: SurfaceMesh, leaf_size: int = 4) -> FaceBVH:
     n_faces = len(T)
     lo_f, hi_f = T.min(axis=1), T.max(axis=1)
     scene_lo, scene_hi = lo_f.min(0), hi_f.max(0)
-    code = _morton3((T.mean(axis=1) - scene_lo) / np.maximum(scene_hi - scene_lo, 1e-300))
+    # One scale for all axes (the bounding cube): per-axis scaling would give a thin water
+    # layer's z the same weight as x and y, and scatter xy-neighbours across the tree.
+    extent = max(float(np.max(scene_hi - scene_lo)), 1e-300)
+    code = _morton3((T.mean(axis=1) - scene_lo) / extent)
     order = np.argsort(code, kind="stable")
     n_leaves = 1 << max(int(np.ceil(np.log2(max(-(-n_faces // leaf_size), 1)))), 0)
     slots = np.full(n_leaves * leaf_size, -1, dtype=np.int64)
@@ -255,7 +258,9 @@ def _start_points_bvh(mesh: SurfaceMesh, bvh: FaceBVH, P, L):
         live = node > 0
         idx = jnp.maximum(node, 1)
         s_in, s_out = _clip_to_box(P, d, bvh.lo[idx], bvh.hi[idx], best_s + tol)
-        hit_box = live & (s_in <= s_out)
+        # Padding leaves have empty boxes (lo > hi), which a slab test alone would accept.
+        nonempty = jnp.all(bvh.lo[idx] <= bvh.hi[idx], axis=-1)
+        hit_box = live & nonempty & (s_in <= s_out)
         is_leaf = idx >= n_leaves
         # Leaf: test its faces (all lanes compute, masked; padding faces never hit).
         leaf = jnp.where(is_leaf, idx - n_leaves, 0)
