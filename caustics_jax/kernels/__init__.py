@@ -1,0 +1,92 @@
+"""Real-time pipeline kernels (MATH.md §8): collection points and fixed point (seed 000),
+denoiser, cascades, attenuation and Fresnel (seed 004), projected photons (seed 002).
+
+Pure, vectorised over leading batch axes, float32 in -> float32 out.
+"""
+
+from .attenuation import (
+    fresnel_reflect_approx,
+    fresnel_refract_approx,
+    intensity_attenuation,
+    ray_intensity,
+    schlick_f0,
+)
+from .bilateral import (
+    C_SCENE_FACTOR,
+    C_SCENE_FACTOR_ALG4,
+    adaptive_kernel_params,
+    bilateral_denoise,
+    bilateral_weight,
+    denoise_subpass,
+    luminance,
+)
+from .cascades import (
+    cascade_deltas,
+    cascade_dispatch,
+    cascade_intensity_scale,
+    cascade_projection,
+    cascade_thread_counts,
+    ccm0_size,
+    light_position,
+)
+from .collection import (
+    RADIUS_CAP,
+    cylinder_aabb,
+    gather_previous,
+    in_cylinder,
+    pixel_footprint_radius,
+    pixel_spread_angle,
+    ray_cone_propagate,
+    ray_cone_radius,
+    resolve,
+    reuse_accepted,
+    reuse_weight,
+    temporal_ema,
+)
+from .fixed_point import (
+    FixedPointSum,
+    fixed_point_accumulate,
+    fixed_point_decode,
+    fixed_point_encode,
+)
+from .projection import projected_photon_position, ray_plane_intersection
+
+__all__ = [
+    "C_SCENE_FACTOR",
+    "C_SCENE_FACTOR_ALG4",
+    "FixedPointSum",
+    "RADIUS_CAP",
+    "adaptive_kernel_params",
+    "bilateral_denoise",
+    "bilateral_weight",
+    "cascade_deltas",
+    "cascade_dispatch",
+    "cascade_intensity_scale",
+    "cascade_projection",
+    "cascade_thread_counts",
+    "ccm0_size",
+    "cylinder_aabb",
+    "denoise_subpass",
+    "fixed_point_accumulate",
+    "fixed_point_decode",
+    "fixed_point_encode",
+    "fresnel_reflect_approx",
+    "fresnel_refract_approx",
+    "gather_previous",
+    "in_cylinder",
+    "intensity_attenuation",
+    "light_position",
+    "luminance",
+    "pixel_footprint_radius",
+    "pixel_spread_angle",
+    "projected_photon_position",
+    "ray_cone_propagate",
+    "ray_cone_radius",
+    "ray_intensity",
+    "ray_plane_intersection",
+    "resolve",
+    "reuse_accepted",
+    "reuse_weight",
+    "schlick_f0",
+    "temporal_ema",
+]

@@ -1,0 +1,77 @@
+"""Photon intensity of seed 004: attenuation and Schlick-like Fresnel (eq. 12-15).
+
+Eq. 14 is Schlick's approximation with a free base fraction `F_frac` and exponent
+`F_exp`; with `F_frac = ((eta - 1)/(eta + 1))^2` and `F_exp = 5` it is Schlick's own.
+Its error against the exact Fresnel term (`caustics_jax.geometry.fresnel_reflectance`)
+is measured in `experiments/kernel_approximations.py`.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ..geometry import dot
+from ._util import as_float, check, check_last_axis, float_dtype
+
+#: Focus bias of eq. 13 ("experimentally defined constant set to 0.95").
+GAMMA = 0.95
+#: Schlick's exponent; seed 004 leaves `F_exp` free.
+SCHLICK_EXPONENT = 5.0
+
+
+def intensity_attenuation(t: Float[Array, "*batch"], t_max, gamma=GAMMA) -> Float[Array, "*batch"]:
+    """Underwater intensity attenuation `I_att` (seed 004 eq. 13).
+
+    With `x = 1 - t/t_max`: `1 - (x - gamma)/(1 - gamma)` if `x > gamma`, else
+    `1 - (gamma - x)/gamma = x / gamma`. A tent in `t`: 0 at the surface, 1 at
+    `t = (1 - gamma) t_max`, back to 0 at `t_max`. `t` is clipped to `[0, t_max]`.
+    """
+    check(t_max, "t_max", lower=0, strict=True)
+    check(gamma, "gamma", lower=0, strict=True, upper=1)
+    if not (0 < float(jnp.max(jnp.asarray(gamma))) < 1):
+        raise ValueError(f"gamma must lie in (0, 1), got {gamma}")
+    t = jnp.asarray(t)
+    dtype = float_dtype(t)
+    t_max, gamma = as_float(t_max, dtype), as_float(gamma, dtype)
+    x = 1 - jnp.clip(t.astype(dtype), 0, t_max) / t_max
+    return jnp.where(x > gamma, 1 - (x - gamma) / (1 - gamma), 1 - (gamma - x) / gamma)
+
+
+def schlick_f0(eta) -> float:
+    """Normal-incidence reflectance `((eta - 1)/(eta + 1))^2`: Schlick's choice of `F_frac`."""
+    return ((eta - 1) / (eta + 1)) ** 2
+
+
+def fresnel_reflect_approx(
+    l_dir: Float[Array, "*batch 3"],
+    n: Float[Array, "*batch 3"],
+    f_frac,
+    f_exp=SCHLICK_EXPONENT,
+) -> Float[Array, "*batch"]:
+    """Schlick-like reflected Fresnel term (seed 004 eq. 14).
+
+    `F_refl = F_frac + (1 - F_frac) (1 - (-l_dir . n))^F_exp` for light travelling along
+    `l_dir` onto a surface with normal `n`. The cosine is clamped to `[0, 1]` so a
+    back-facing or slightly non-unit input cannot raise a negative base to a power.
+    """
+    check_last_axis(l_dir, "l_dir", 3)
+    check(f_frac, "f_frac", lower=0, upper=1)
+    check(f_exp, "f_exp", lower=0)
+    dtype = float_dtype(l_dir, n)
+    cos = jnp.clip(-dot(jnp.asarray(l_dir, dtype), jnp.asarray(n, dtype)), 0, 1)
+    f_frac = as_float(f_frac, dtype)
+    return f_frac + (1 - f_frac) * (1 - cos) ** as_float(f_exp, dtype)
+
+
+def fresnel_refract_approx(
+    l_dir: Float[Array, "*batch 3"], n: Float[Array, "*batch 3"], f_frac, f_exp=SCHLICK_EXPONENT
+) -> Float[Array, "*batch"]:
+    """Refracted Fresnel term, the complement of eq. 14 (seed 004 eq. 15)."""
+    return 1 - fresnel_reflect_approx(l_dir, n, f_frac, f_exp)
+
+
+def ray_intensity(L, i_att, F):
+    """Photon ray intensity `R = L I_att F` (seed 004 eq. 12)."""
+    dtype = float_dtype(L, i_att, F)
+    return jnp.asarray(L, dtype) * jnp.asarray(i_att, dtype) * jnp.asarray(F, dtype)
