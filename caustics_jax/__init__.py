@@ -4,6 +4,7 @@ The public API is what this module re-exports. float64 is never switched on by i
 the package: use `precision("float64")` or `enable_x64()`.
 """
 
+from . import scenes
 from ._precision import enable_x64, precision
 from .barycentric import barycentric_point, edge_barycentric, interpolated_normal
 from .conic import (
@@ -21,6 +22,7 @@ from .geometry import (
     refract,
     safe_normalize,
 )
+from .mesh import SurfaceMesh, cross_edge
 from .objectives import (
     ObjectiveStatus,
     angle_difference_residual,
@@ -29,9 +31,19 @@ from .objectives import (
     signed_sine_and_status,
 )
 
+from .solvers import Solution, Status, solve
+from .start_points import start_points
+
 __version__ = "0.1.0"
 
 __all__ = [
+    "Solution",
+    "Status",
+    "SurfaceMesh",
+    "cross_edge",
+    "scenes",
+    "solve",
+    "start_points",
     "ObjectiveStatus",
     "angle_difference_residual",
     "barycentric_point",

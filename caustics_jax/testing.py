@@ -117,3 +117,72 @@ def line_plane_barycentric(V, P, L):
     A = np.stack([E1, E2, -(L - P)], -1)
     sol = np.linalg.solve(A, (P - V[:, 0])[..., None])[..., 0]
     return sol[:, :2]
+
+
+class PlantedMeshPaths(NamedTuple):
+    """Refracted paths planted on a mesh: `P -> M -> L` refracts at `M` (face, ab).
+
+    Attributes: `P`, `L`, `M` `(n, 3)`; `face` `(n,)`; `ab` `(n, 2)` (all float64 numpy).
+    """
+
+    P: np.ndarray
+    L: np.ndarray
+    M: np.ndarray
+    face: np.ndarray
+    ab: np.ndarray
+
+
+def planted_mesh_paths(mesh, n: int, seed: int, *, eta: float = 1.333, max_angle_deg: float = 35.0,
+                       depth: tuple[float, float] = (0.2, 0.9),
+                       height: tuple[float, float] = (1.0, 4.0), margin: float = 0.15):
+    """`n` paths with a known refraction point on random faces of `mesh` (float64).
+
+    Faces are drawn among those whose centroid lies at least `margin` of the mesh's xy
+    extent inside its bounding box (so a walk from `M0` does not start at the boundary).
+    `w_P` lies within `max_angle_deg` of `-n_s` (below water's critical angle, 48.6 deg).
+    """
+    rng = np.random.default_rng(seed)
+    Vx = np.asarray(mesh.vertices, np.float64)
+    Fx = np.asarray(mesh.faces)
+    Nx = np.asarray(mesh.normals, np.float64)
+    cen = Vx[Fx].mean(1)
+    lo, hi = Vx.min(0), Vx.max(0)
+    span = hi - lo
+    inner = np.all((cen[:, :2] > lo[:2] + margin * span[:2]) & (cen[:, :2] < hi[:2] - margin * span[:2]), -1)
+    faces = rng.choice(np.nonzero(inner)[0], n)
+    V, N = Vx[Fx[faces]], Nx[Fx[faces]]
+    ab = rng.dirichlet([2.0, 2.0, 2.0], n)[:, 1:]
+    M = V[:, 0] + ab[:, :1] * (V[:, 1] - V[:, 0]) + ab[:, 1:] * (V[:, 2] - V[:, 0])
+    n_s = _unit(N[:, 0] + ab[:, :1] * (N[:, 1] - N[:, 0]) + ab[:, 1:] * (N[:, 2] - N[:, 0]))
+    cos_t = rng.uniform(np.cos(np.radians(max_angle_deg)), 1.0, n)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    helper = np.where(np.abs(n_s[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    s = _unit(np.cross(n_s, helper))
+    t = np.cross(n_s, s)
+    sin_t = np.sqrt(1 - cos_t**2)[:, None]
+    w_P = -cos_t[:, None] * n_s + sin_t * (np.cos(phi)[:, None] * s + np.sin(phi)[:, None] * t)
+    w_L = _unit(_refract_np(-w_P, -n_s, eta))
+    P = M + rng.uniform(*depth, (n, 1)) * w_P
+    L = M + rng.uniform(*height, (n, 1)) * w_L
+    return PlantedMeshPaths(P=P, L=L, M=M, face=faces.astype(np.int32), ab=ab)
+
+
+def refraction_angle_error(mesh, face, ab, P, L, eta: float) -> np.ndarray:
+    """Angle (rad) between `refract(-w_P, -n_s, eta)` and `w_L` at `(face, ab)`, float64 numpy.
+
+    Independent of the package's kernels: the check every solver result is judged by.
+    Returns `pi` where the refraction is total internal reflection.
+    """
+    Vx = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)[face]]
+    Nx = np.asarray(mesh.normals, np.float64)[np.asarray(mesh.faces)[face]]
+    ab = np.asarray(ab, np.float64)
+    a, b = ab[:, :1], ab[:, 1:]
+    M = Vx[:, 0] + a * (Vx[:, 1] - Vx[:, 0]) + b * (Vx[:, 2] - Vx[:, 0])
+    n_s = _unit(Nx[:, 0] + a * (Nx[:, 1] - Nx[:, 0]) + b * (Nx[:, 2] - Nx[:, 0]))
+    w_P = _unit(np.asarray(P, np.float64) - M)
+    w_L = _unit(np.asarray(L, np.float64) - M)
+    r = _refract_np(-w_P, -n_s, eta)
+    tir = np.all(r == 0, -1)
+    cos = np.clip(np.sum(_unit(np.where(tir[:, None], 1.0, r)) * w_L, -1), -1, 1)
+    sin = np.linalg.norm(np.cross(np.where(tir[:, None], 1.0, r), w_L), axis=-1)
+    return np.where(tir, np.pi, np.arctan2(sin, cos))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -45,6 +46,32 @@ def _validate(mesh, P, L, eta, method):
     if not np.isfinite(eta_f) or eta_f <= 0:
         raise ValueError(f"eta must be a finite positive index ratio, got {eta}")
     return jnp.asarray(P, dtype), jnp.asarray(L, dtype), eta_f
+
+
+def _bucket(n: int, minimum: int = 256) -> int:
+    return max(minimum, 1 << (max(n, 1) - 1).bit_length())
+
+
+def bucketed(mesh: SurfaceMesh) -> SurfaceMesh:
+    """The mesh padded to power-of-two face and vertex counts, so jit compiles once per bucket.
+
+    Padding faces are `(0, 0, 0)` with no neighbours and are never referenced by a real
+    face's adjacency, so no walk can enter them; padding vertices are zeros.
+    """
+    F, V = mesh.faces.shape[0], mesh.vertices.shape[0]
+    Fb, Vb = _bucket(F), _bucket(V)
+    if (F, V) == (Fb, Vb):
+        return mesh
+
+    def pad(x, n, value):
+        return jnp.concatenate([x, jnp.full((n - x.shape[0],) + x.shape[1:], value, x.dtype)])
+
+    return eqx.tree_at(
+        lambda m: (m.vertices, m.normals, m.faces, m.face_normals, m.neighbors, m.neighbor_edge),
+        mesh,
+        (pad(mesh.vertices, Vb, 0), pad(mesh.normals, Vb, 0), pad(mesh.faces, Fb, 0),
+         pad(mesh.face_normals, Fb, 0), pad(mesh.neighbors, Fb, -1), pad(mesh.neighbor_edge, Fb, -1)),
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("options",))
@@ -102,7 +129,7 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
         if opts.max_steps < 1 or opts.ellipse_samples < 2:
             raise ValueError("max_steps must be >= 1 and ellipse_samples >= 2")
         face, ab0, found = start if start is not None else start_points(mesh, P, L)
-        return _walk_batch(mesh, P, L, face, ab0, found, eta, opts)
+        return _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, opts)
     if method == "newton":
         from .newton import solve_newton
 

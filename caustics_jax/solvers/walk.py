@@ -43,7 +43,7 @@ from ..conic import (
     solve_quadratic,
 )
 from ..mesh import SurfaceMesh, cross_edge
-from ..objectives import ObjectiveStatus, signed_sine_and_status
+from ..objectives import ObjectiveStatus, path_vectors, signed_sine_and_status
 from ._solution import Status
 
 WALK, BISECT, DONE = 0, 1, 2
@@ -114,15 +114,19 @@ def _orientation(coef, e, tau):
     return tau, perp
 
 
-def _next_crossing(coef, e, tau, perp, entry_edge=-1, entry_t=0.0):
+def _edge_roots(coef):
+    t, valid = edge_intersections(coef)
+    return t, valid, edge_intersection_points(t)  # (3, 2), (3, 2), (3, 2, 2)
+
+
+def _next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
     """The first edge root met when travelling along the conic from `e` in direction `tau`.
 
     Excluded as candidates: roots within `64 eps` of `e` (a vertex root reported on two
     edges), and on the entry edge the root nearest the entry parameter when it is within
     `8 sqrt(eps)` of it (the entry point itself, recomputed in this triangle's conic).
     """
-    t, valid = edge_intersections(coef)
-    ab = edge_intersection_points(t)  # (3, 2, 2)
+    t, valid, ab = roots
     eps = float(np.finfo(t.dtype).eps)
     v = ab - e
     dist = jnp.linalg.norm(v, axis=-1)
@@ -131,8 +135,14 @@ def _next_crossing(coef, e, tau, perp, entry_edge=-1, entry_t=0.0):
     gap = jnp.where(on_entry & valid, jnp.abs(t - entry_t), jnp.inf)
     nearest = gap == jnp.min(gap)
     cand = cand & ~(nearest & (gap < 8 * np.sqrt(eps)))
-    phi = jnp.arctan2(v @ perp, v @ tau)
-    phi = jnp.where(phi < 0, phi + jnp.pi, phi)
+    along, across = v @ tau, v @ perp
+    phi = jnp.arctan2(across, along)
+    phi = jnp.where(phi < 0, phi + jnp.pi, phi)  # the cutting line's angle, in [0, pi)
+    # On the tangent line itself (a straight curve: constant normals, a flat surface) the
+    # line angle is 0 or pi only up to rounding; there, ahead comes first (nearest first)
+    # and behind comes last.
+    on_tangent = jnp.abs(across) <= 1e3 * eps * dist
+    phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
     phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
     i = jnp.argmin(phi)
     return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
@@ -158,8 +168,19 @@ def _pencil_point(coef, anchor, tau, perp, phi):
 
 
 def _f(V, N, P, L, ab, eta):
-    # The plane orientation: the paper's tangent sign is rounding noise on gentle waves.
-    return signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
+    """`f` and status at the points `ab` `(k, 2)` of one triangle, as one batched call.
+
+    One call site per step keeps the compiled program small (XLA compile time grows with
+    every inlined copy). The plane orientation: the paper's tangent sign is rounding noise
+    on gentle waves (`signed_sine_and_status`).
+    """
+    return jax.vmap(lambda x: signed_sine_and_status(V, N, P, L, x, eta, orientation="plane"))(ab)
+
+
+def _cos_at_P(V, N, P, L, ab):
+    """`-w_P . n_s` at points `ab` `(k, 2)`: the cosine of incidence on P's side."""
+    _, n_s, w_P, _, _ = path_vectors(V, N, P, L, ab)
+    return -jnp.sum(w_P * n_s, axis=-1)
 
 
 def _opposite(f1, f2):
@@ -170,9 +191,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status."""
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
-    f0, st0 = _f(V, N, P, L, ab0, eta)
     t0 = conic_tangent(coef, ab0)
     singular = jnp.linalg.norm(t0) == 0
+    roots = _edge_roots(coef)
 
     # The paper's sign of f flips as M crosses the line PL, i.e. at M0; the "plane"
     # orientation is continuous there but its sign is rounding noise within rounding
@@ -181,31 +202,41 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     dirs = []
     for s in (1.0, -1.0):
         tau, perp = _orientation(coef, ab0, s * t0)
-        ok, k, t, ab, phi = _next_crossing(coef, ab0, tau, perp)
-        fx, stx = _f(V, N, P, L, ab, eta)
+        ok, k, t, ab, phi = _next_crossing(roots, ab0, tau, perp)
         room = jnp.linalg.norm(ab - ab0)
         delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
         near = _project_to_conic(coef, ab0 + delta * tau)
         v = near - ab0
         phi_s = jnp.arctan2(v @ perp, v @ tau)
         phi_s = jnp.clip(phi_s, 0, jnp.where(ok, phi / 2, jnp.pi / 2))
-        fs, _ = _f(V, N, P, L, near, eta)
-        # No room for a near point: f is continuous, so the exit's sign stands for the arc.
-        fs = jnp.where(ok & (room < 4 * delta0), fx, fs)
-        dirs.append((ok, k, t, ab, phi, fx, stx, tau, perp, phi_s, fs, near))
-    (okp, kp, tp, abp, phip, fp, stp, taup, perpp, phisp, fsp, nearp) = dirs[0]
-    (okm, km, tm, abm, phim, fm, stm, taum, perpm, phism, fsm, nearm) = dirs[1]
-
-    br_p = okp & _opposite(fsp, fp) & (stp == ObjectiveStatus.OK)
-    br_m = okm & _opposite(fsm, fm) & (stm == ObjectiveStatus.OK)
-    use_m_bracket = br_m & (~br_p | (phim < phip))
-    walk_m = okm & (~okp | (jnp.abs(fm) < jnp.abs(fp)))
+        dirs.append((ok, k, t, ab, phi, tau, perp, phi_s, near, room))
+    (okp, kp, tp, abp, phip, taup, perpp, phisp, nearp, roomp) = dirs[0]
+    (okm, km, tm, abm, phim, taum, perpm, phism, nearm, roomm) = dirs[1]
 
     # Ellipse inside the triangle: sample the whole curve through the pencil at M0.
     tau_e, perp_e = _orientation(coef, ab0, t0)
     phis = jnp.pi * jnp.arange(1, n_ellipse, dtype=dtype) / n_ellipse
     pts, pts_ok = jax.vmap(lambda p: _pencil_point(coef, ab0, tau_e, perp_e, p))(phis)
-    fs, sts = jax.vmap(lambda ab: _f(V, N, P, L, ab, eta))(pts)
+
+    f_all, st_all = _f(V, N, P, L, jnp.concatenate([jnp.stack([ab0, abp, abm, nearp, nearm]), pts]), eta)
+    f0, fp, fm, fsp, fsm = f_all[:5]
+    st0, stp, stm = st_all[0], st_all[1], st_all[2]
+    # No room for a near point: f is continuous, so the exit's sign stands for the arc.
+    fsp = jnp.where(okp & (roomp < 4 * delta0), fp, fsp)
+    fsm = jnp.where(okm & (roomm < 4 * delta0), fm, fsm)
+
+    OK = ObjectiveStatus.OK
+    br_p = okp & _opposite(fsp, fp) & (stp == OK) & (st_all[3] == OK)
+    br_m = okm & _opposite(fsm, fm) & (stm == OK) & (st_all[4] == OK)
+    use_m_bracket = br_m & (~br_p | (phim < phip))
+    # Walk direction without a bracket: out of total internal reflection first (towards
+    # the larger cosine at P's side), else towards the smaller |f|.
+    tirp, tirm = stp == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+    cos_p, cos_m = _cos_at_P(V, N, P, L, jnp.stack([abp, abm]))
+    prefer_m = jnp.where(tirp != tirm, tirp, jnp.where(tirp, cos_m > cos_p, jnp.abs(fm) < jnp.abs(fp)))
+    walk_m = okm & (~okp | prefer_m)
+
+    fs, sts = f_all[5:], st_all[5:]
     phis_all, fs_all, ok_all = phis, fs, pts_ok & (sts == ObjectiveStatus.OK)
     change = _opposite(fs_all[:-1], fs_all[1:]) & ok_all[:-1] & ok_all[1:]
     j = jnp.argmax(change)
@@ -231,17 +262,16 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
 
     status = jnp.asarray(Status.FOUND, jnp.int32)
     mode = jnp.where(bracket, BISECT, WALK)
-    status = jnp.where(~bracket & (st_exit == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION),
-                       Status.TOTAL_INTERNAL_REFLECTION, status)
-    mode = jnp.where(~bracket & (st_exit != ObjectiveStatus.OK), DONE, mode)
+    # A walk may start inside total internal reflection (M0 beyond the critical angle):
+    # it walks on until f is defined again, so only a degenerate exit stops it here.
+    mode = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), DONE, mode)
+    status = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), Status.DEGENERATE, status)
     mode = jnp.where(is_ellipse & ~ellipse_bracket, DONE, mode)
     status = jnp.where(is_ellipse & ~ellipse_bracket, Status.UNRESOLVED_ELLIPSE, status)
-    mode = jnp.where(jnp.abs(f0) <= tol, DONE, mode)  # M0 itself is a solution
-    status = jnp.where(jnp.abs(f0) <= tol, Status.FOUND, status)
+    at_m0 = (jnp.abs(f0) <= tol) & (st0 == OK)  # M0 itself is a solution
+    mode = jnp.where(at_m0, DONE, mode)
+    status = jnp.where(at_m0, Status.FOUND, status)
     # Terminal conditions that override everything else, most specific last.
-    tir0 = st0 == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
-    mode = jnp.where(tir0, DONE, mode)
-    status = jnp.where(tir0, Status.TOTAL_INTERNAL_REFLECTION, status)
     degenerate = singular | (st0 == ObjectiveStatus.DEGENERATE)
     mode = jnp.where(degenerate, DONE, mode)
     status = jnp.where(degenerate, Status.DEGENERATE, status)
@@ -257,23 +287,29 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     )
 
 
-def _walk_step(mesh, P, L, eta, tol, s: _State) -> _State:
-    g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
-    left = g < 0
-    V, N, coef = _frame(mesh, g, P, L)
+def _walk_geometry(mesh, coef, g, k_in, t_in, e):
+    """Enter face `g` at `e` (entry edge `k_in`): inward travel direction, next crossing."""
     t = conic_tangent(coef, e)
     inward = jnp.asarray(_INWARD, t.dtype)[jnp.clip(k_in, 0, 2)]
     side = t @ inward
     tau, perp = _orientation(coef, e, jnp.where(side < 0, -t, t))
-    f_e, st_e = _f(V, N, P, L, e, eta)
-    ok, k, tt, ab, phi = _next_crossing(coef, e, tau, perp, k_in, t_in)
-    fx, stx = _f(V, N, P, L, ab, eta)
+    ok, k, tt, ab, phi = _next_crossing(_edge_roots(coef), e, tau, perp, k_in, t_in)
+    return side, tau, perp, ok, k, tt, ab, phi
 
-    found_e = jnp.abs(f_e) <= tol
-    found_x = ok & (jnp.abs(fx) <= tol) & (stx == ObjectiveStatus.OK)
-    bracket = ok & _opposite(f_e, fx) & (stx == ObjectiveStatus.OK)
+
+def _walk_update(s: _State, g, e, geometry, f2, st2, tol) -> _State:
+    """Cross into `g`; bracket if f changes sign on its arc, else schedule the next crossing."""
+    side, tau, perp, ok, k, tt, ab, phi = geometry
+    left = g < 0
+    f_e, fx, st_e, stx = f2[0], f2[1], st2[0], st2[1]
+    e_ok, x_ok = st_e == ObjectiveStatus.OK, stx == ObjectiveStatus.OK
+    found_e = e_ok & (jnp.abs(f_e) <= tol)
+    found_x = ok & x_ok & (jnp.abs(fx) <= tol)
+    bracket = ok & e_ok & x_ok & _opposite(f_e, fx)
     lost = ~ok | (side == 0)
-    tir = stx == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+    # Walking out of the region where light from P can leave into total internal
+    # reflection: no root ahead on this branch. (Inside it, keep walking: f is undefined.)
+    tir = e_ok & (stx == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
 
     status, mode = s.status, jnp.where(bracket, BISECT, WALK)
     for cond, code in ((tir, Status.TOTAL_INTERNAL_REFLECTION), (lost, Status.LOST_CURVE),
@@ -300,12 +336,12 @@ def _chord_point(coef, ab_lo, ab_hi, lam):
     p = _project_to_conic(coef, q)
     chord = ab_hi - ab_lo
     along = (p - ab_lo) @ chord
-    ok = (along > 0) & (along < chord @ chord) & (jnp.abs(conic_value(coef, p)) < jnp.inf)
+    ok = (along > 0) & (along < chord @ chord)
     return p, ok
 
 
-def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
-    """One refinement step on the arc between the bracket ends ("dichotomy", §3.4.3).
+def _bisect_geometry(coef, s: _State, illinois: bool):
+    """The next cut of the bracketed arc ("dichotomy", seed 001 §3.4.3).
 
     The arc is cut by the conic's normal line through the chord point at `lam` (midpoint,
     or Illinois false position): well-conditioned on the nearly straight arcs of a fine
@@ -313,7 +349,6 @@ def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     cut is the line through the anchor at the interpolated pencil angle `phi`, exact on
     any arc but ill-conditioned in float32 when the whole arc spans a tiny angle.
     """
-    V, N, coef = _frame(mesh, s.face, P, L)
     denom = s.f_hi - s.f_lo
     lam = 0.5
     if illinois:
@@ -323,10 +358,12 @@ def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     p_pencil, ok_pencil = _pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
     p = jnp.where(ok_chord, p_chord, p_pencil)
-    ok = ok_pencil | ok_chord
     v = p - s.anchor
     phi = jnp.where(ok_chord, jnp.arctan2(v @ s.perp, v @ s.tau), phi_try)
-    fm, stm = _f(V, N, P, L, p, eta)
+    return p, phi, ok_pencil | ok_chord
+
+
+def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _State:
     ok = ok & (stm == ObjectiveStatus.OK)
     to_hi = _opposite(fm, s.f_lo)  # the root lies between lo and p: p becomes the new hi
     phi_lo = jnp.where(to_hi, s.phi_lo, phi)
@@ -360,6 +397,25 @@ def _bisect_step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     )
 
 
+def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
+    """One iteration: a triangle crossing (WALK) or a refinement cut (BISECT).
+
+    Under `vmap` both branches run for every lane, so they share one triangle gather,
+    one conic and one batched evaluation of `f` (two points) instead of two of each.
+    """
+    walking = s.mode == WALK
+    g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
+    V, N, coef = _frame(mesh, jnp.where(walking, g, s.face), P, L)
+    walk_geo = _walk_geometry(mesh, coef, g, k_in, t_in, e)
+    p, phi, ok = _bisect_geometry(coef, s, illinois)
+    ab_x = walk_geo[6]
+    pts = jnp.where(walking, jnp.stack([e, ab_x]), jnp.stack([p, p]))
+    f2, st2 = _f(V, N, P, L, pts, eta)
+    walked = _walk_update(s, g, e, walk_geo, f2, st2, tol)
+    refined = _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
+    return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
+
+
 def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptions):
     """Walk one lane (vmapped by `walk`); returns the final `_State`."""
     dtype = mesh.dtype
@@ -368,9 +424,7 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptio
     illinois = options.bracket == "illinois"
 
     def body(s):
-        if_walk = _walk_step(mesh, P, L, eta, tol, s)
-        if_bisect = _bisect_step(mesh, P, L, eta, tol, illinois, s)
-        nxt = jax.tree.map(lambda w, b: jnp.where(s.mode == WALK, w, b), if_walk, if_bisect)
+        nxt = _step(mesh, P, L, eta, tol, illinois, s)
         return jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
 
     state = jax.lax.while_loop(
