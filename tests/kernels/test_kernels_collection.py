@@ -25,6 +25,7 @@ from caustics_jax.kernels import (
 DTYPES = [jnp.float32, jnp.float64]
 EPS = {jnp.float32: np.finfo(np.float32).eps, jnp.float64: np.finfo(np.float64).eps}
 aabb_j = jax.jit(cylinder_aabb)
+gather_j = jax.jit(gather_previous)
 seeds = st.integers(0, 2**32 - 1)
 
 
@@ -250,7 +251,7 @@ def test_gather_matches_a_brute_force_loop_and_keeps_a_constant_field(dtype, see
     m, mp = rng.integers(0, 2, n_cur), rng.integers(0, 2, k)
     Lp = rng.uniform(0, 1, (k, 3))
     cast = lambda a: jnp.asarray(a, dtype)  # noqa: E731
-    L_hat, wsum = gather_previous(
+    L_hat, wsum = gather_j(
         cast(p), cast(n), m, cast(r), cast(pp), cast(npv), mp, cast(rp), cast(Lp)
     )
     assert L_hat.dtype == dtype
@@ -259,7 +260,7 @@ def test_gather_matches_a_brute_force_loop_and_keeps_a_constant_field(dtype, see
     # lanes whose acceptance flips under float32 rounding would differ: compare the rest
     np.testing.assert_allclose(np.asarray(wsum), want_w, atol=tol)
     np.testing.assert_allclose(np.asarray(L_hat), want, atol=tol)
-    const, _ = gather_previous(
+    const, _ = gather_j(
         cast(p), cast(n), m, cast(r), cast(pp), cast(npv), mp, cast(rp), cast(np.full((k, 3), 0.25))
     )
     np.testing.assert_allclose(np.asarray(const)[want_w > 0], 0.25, rtol=8 * EPS[dtype])
