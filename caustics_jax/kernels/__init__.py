@@ -1,5 +1,6 @@
-"""Real-time pipeline kernels (MATH.md §8): collection points and fixed point (seed 000),
-denoiser, cascades, attenuation and Fresnel (seed 004), projected photons (seed 002).
+"""Real-time pipeline kernels (MATH.md §8, §7 sprites): collection points and fixed point
+(seed 000), denoiser, cascades, attenuation, Fresnel and sprites (seed 004), projected
+photons (seed 002).
 
 Pure, vectorised over leading batch axes, float32 in -> float32 out.
 """
@@ -50,6 +51,13 @@ from .fixed_point import (
     fixed_point_encode,
 )
 from .projection import projected_photon_position, ray_plane_intersection
+from .sprites import (
+    sprite_basis,
+    sprite_corners,
+    sprite_foreshortening,
+    sprite_intensity,
+    sprite_size,
+)
 
 __all__ = [
     "C_SCENE_FACTOR",
@@ -88,5 +96,10 @@ __all__ = [
     "reuse_accepted",
     "reuse_weight",
     "schlick_f0",
+    "sprite_basis",
+    "sprite_corners",
+    "sprite_foreshortening",
+    "sprite_intensity",
+    "sprite_size",
     "temporal_ema",
 ]
