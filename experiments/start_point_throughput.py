@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -64,6 +65,27 @@ def measure(scene, method, bvh=None):
                      found=float(np.mean(out.found)))  # fmt: skip
 
 
+def slab_cells(scene):
+    """Cells each segment's xy projection crosses inside the wave slab: the grid path's
+    per-segment work bound `k` (the DDA stops earlier, at the first crossing)."""
+    g = scene.surface.grid
+    P = np.asarray(scene.receivers, np.float64)
+    L = np.asarray(scene.lights.endpoint(scene.receivers, 0), np.float64)
+    z = np.asarray(scene.surface.vertices[:, 2], np.float64)
+    d = L - P
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo = np.array([g.x0, g.y0, z.min()])
+        hi = np.array([g.x0 + g.nx * g.dx, g.y0 + g.ny * g.dy, z.max()])
+        t0, t1 = (lo - P) / d, (hi - P) / d
+    s_in = np.clip(np.max(np.minimum(t0, t1), -1), 0, 1)
+    s_out = np.clip(np.min(np.maximum(t0, t1), -1), 0, 1)
+    cell = np.array([g.dx, g.dy])
+    ij_in = np.floor(((P + s_in[:, None] * d)[:, :2] - lo[:2]) / cell)
+    ij_out = np.floor(((P + s_out[:, None] * d)[:, :2] - lo[:2]) / cell)
+    k = np.where(s_in <= s_out, np.abs(ij_out - ij_in).sum(-1) + 1, 0)
+    return dict(mean=float(k.mean()), max=int(k.max()))
+
+
 # %%
 def sweep():
     rows = []
@@ -78,6 +100,7 @@ def sweep():
             bvh_s = time.perf_counter() - t
             F = int(scene.surface.faces.shape[0])
             grid_out, grid = measure(scene, "grid")
+            grid["slab_cells"] = slab_cells(scene)
             gen_out, gen = measure(scene, "general", bvh)
             mesh = scene.surface
             both = np.asarray(grid_out.found & gen_out.found)
@@ -92,7 +115,9 @@ def sweep():
             print(f"wavy {light:8s} F={F:>9,d}  grid {grid['segments_per_s']:>12,.0f}/s  "
                   f"general {gen['segments_per_s']:>12,.0f}/s  found {grid['found']:.3f}  "
                   f"agree {agree['found_equal']:.4f} ({agree['max_point_diff_m']:.1e} m)  "
-                  f"build {build_s:.2f}s bvh {bvh_s:.2f}s", flush=True)  # fmt: skip
+                  f"build {build_s:.2f}s bvh {bvh_s:.2f}s  slab cells mean "
+                  f"{grid['slab_cells']['mean']:.1f} max {grid['slab_cells']['max']}",
+                  flush=True)  # fmt: skip
         scene = lagoon(n, seed=0, n_receivers=128, dtype=DTYPE)
         t = time.perf_counter()
         bvh = build_bvh(scene.surface)
@@ -111,16 +136,21 @@ def sweep():
 
 # %%
 _BUILD_1M = """
-import resource, time, json, jax
+import time, json, jax
 import caustics_jax.scenes as S
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+def vm(key):  # this process's own high-water mark (ru_maxrss survives exec from the parent)
+    for line in open("/proc/self/status"):
+        if line.startswith(key):
+            return int(line.split()[1]) / 1024
+
+base = vm("VmHWM")
 t = time.perf_counter()
 scene = S.wavy_pool(1_000_000, seed=0, dtype="float32")
 jax.block_until_ready(scene.surface.vertices)
 dt = time.perf_counter() - t
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 print(json.dumps(dict(triangles=int(scene.surface.faces.shape[0]), build_s=dt,
-                      baseline_rss_mib=base / 1024, peak_rss_mib=peak / 1024)))
+                      baseline_rss_mib=base, peak_rss_mib=vm("VmHWM"), final_rss_mib=vm("VmRSS"))))
 """
 
 
@@ -132,7 +162,7 @@ def build_1m():
 
 # %%
 def plot(rows, path=FIG):
-    fig, ax = plt.subplots(figsize=(7.5, 5))
+    fig, (ax, ax_k) = plt.subplots(1, 2, figsize=(12, 5), width_ratios=[3, 2])
     style = {"overhead": "-", "oblique": "--"}
     for light in LIGHTS:
         r = [x for x in rows if x["scene"] == "wavy_pool" and x["light"] == light]
@@ -141,33 +171,43 @@ def plot(rows, path=FIG):
                 label=f"grid DDA, wavy pool, {light} light")
         ax.plot(F, [x["general"]["segments_per_s"] for x in r], "s" + style[light], color="C1",
                 label=f"general BVH, wavy pool, {light} light")
+        for stat, marker in (("mean", "o"), ("max", "v")):
+            ax_k.plot(F, [x["grid"]["slab_cells"][stat] for x in r], marker + style[light],
+                      color="C0" if stat == "mean" else "C3", label=f"{stat}, {light} light")
     r = [x for x in rows if x["scene"] == "lagoon"]
     ax.plot([x["triangles"] for x in r], [x["general"]["segments_per_s"] for x in r], "^-",
             color="C2", label="general BVH, lagoon (irregular), overhead light")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("water surface triangles")
+    for a in (ax, ax_k):
+        a.set_xscale("log")
+        a.set_yscale("log")
+        a.set_xlabel("water surface triangles")
+        a.grid(True, which="both", alpha=0.3)
     ax.set_ylabel("start points per second (segments/s)")
     ax.set_title(f"start_points throughput vs tessellation: grid DDA vs BVH\n"
                  f"({N_SEGMENTS} segments per call, float32, {jax.devices()[0].platform.upper()}, "
-                 "median of 5)")  # fmt: skip
-    ax.grid(True, which="both", alpha=0.3)
+                 f"median of {REPEATS}, shared 2-core machine)")  # fmt: skip
     ax.legend(fontsize=8)
+    ax_k.set_ylabel("grid cells crossed inside the wave slab (per segment)")
+    ax_k.set_title("grid path work bound k vs tessellation\n(fixed wave height: k ~ 1 / cell size)")
+    ax_k.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(exist_ok=True)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 # %%
 if __name__ == "__main__":
+    load_start = os.getloadavg()  # the machine is shared: record how busy it was
     rows = sweep()
     mem = build_1m()
     print(f"1M wavy scene: {mem['triangles']:,d} triangles built in {mem['build_s']:.2f} s, "
-          f"peak RSS {mem['peak_rss_mib']:.0f} MiB (baseline {mem['baseline_rss_mib']:.0f} MiB)")
+          f"peak RSS {mem['peak_rss_mib']:.0f} MiB (baseline {mem['baseline_rss_mib']:.0f} MiB, "
+          f"after {mem['final_rss_mib']:.0f} MiB)")
     plot(rows)
     meta = dict(segments=N_SEGMENTS, dtype=DTYPE, repeats=REPEATS, device=str(jax.devices()[0]),
-                jax=jax.__version__, lights=LIGHTS)  # fmt: skip
+                jax=jax.__version__, lights=LIGHTS, load_avg_start=load_start,
+                load_avg_end=os.getloadavg())  # fmt: skip
     FIG.with_suffix(".json").write_text(json.dumps(dict(meta=meta, rows=rows, build_1m=mem),
                                                    indent=1))  # fmt: skip
     print(f"wrote {FIG} and {FIG.with_suffix('.json')}")

@@ -65,16 +65,19 @@ def test_adjacency_is_symmetric_and_matches_shared_vertices_on_generators(name):
     _assert_adjacency_symmetric_and_correct(MESHES[name])
 
 
-def test_adjacency_is_symmetric_after_obj_write_and_reload(tmp_path):
+def test_adjacency_is_symmetric_after_writing_and_reloading_obj_ply_stl_glb(tmp_path):
     mesh = _obj_roundtrip(tmp_path, MESHES["lagoon"])
     assert mesh.faces.shape == MESHES["lagoon"].faces.shape
     _assert_adjacency_symmetric_and_correct(mesh)
-    # A closed mesh from a file: every edge interior, no boundary.
-    path = tmp_path / "ball.ply"
-    trimesh.creation.icosphere(subdivisions=2).export(path)
-    ball = SurfaceMesh.from_trimesh(trimesh.load(path))
-    _assert_adjacency_symmetric_and_correct(ball)
-    assert np.all(np.asarray(ball.neighbors) >= 0)
+    # Closed meshes from PLY, STL (one vertex copy per face: trimesh merges them) and GLB
+    # (a trimesh.Scene): every edge interior, no boundary.
+    for ext in ("ply", "stl", "glb"):
+        path = tmp_path / f"ball.{ext}"
+        trimesh.creation.icosphere(subdivisions=2).export(path)
+        ball = SurfaceMesh.from_trimesh(trimesh.load(path))
+        assert ball.faces.shape == (320, 3)
+        _assert_adjacency_symmetric_and_correct(ball)
+        assert np.all(np.asarray(ball.neighbors) >= 0)
     # Outward on a sphere: the vertex normal is the radial direction.
     V = np.asarray(ball.vertices)
     np.testing.assert_allclose(
