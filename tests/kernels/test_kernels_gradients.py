@@ -21,7 +21,8 @@ DTYPES = [jnp.float32, jnp.float64]
 
 
 def _finite_grad(f, *args):
-    grads = jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(len(args))))(*args)
+    grad = jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(len(args))))
+    grads = jax.jit(grad)(*args)  # one compile instead of many eager primitives
     return all(bool(jnp.all(jnp.isfinite(g))) for g in grads)
 
 
