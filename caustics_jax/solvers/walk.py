@@ -330,6 +330,11 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, tol) -> _State:
     )
 
 
+def _inside(ab):
+    slack = 64 * jnp.finfo(ab.dtype).eps
+    return (ab[0] >= -slack) & (ab[1] >= -slack) & (ab[0] + ab[1] <= 1 + slack)
+
+
 def _chord_point(coef, ab_lo, ab_hi, lam):
     """Curve point cut by the normal line at `lam` along the chord (well-conditioned on short arcs)."""
     q = ab_lo + lam * (ab_hi - ab_lo)
@@ -357,6 +362,10 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
     phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
     p_pencil, ok_pencil = _pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
+    # The bracketed arc lies in the triangle; a cut landing outside it hit another piece
+    # of the conic (possible for the chord cut near a tangency with an edge).
+    ok_pencil = ok_pencil & _inside(p_pencil)
+    ok_chord = ok_chord & _inside(p_chord)
     p = jnp.where(ok_chord, p_chord, p_pencil)
     v = p - s.anchor
     phi = jnp.where(ok_chord, jnp.arctan2(v @ s.perp, v @ s.tau), phi_try)
