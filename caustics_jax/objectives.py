@@ -58,14 +58,18 @@ def signed_sine_and_status(
       tangent all lie (nearly) in the plane through `P`, `L`, `M`, so `t . (r x w_L)` is
       proportional to how fast that plane turns along the curve; it is exactly 0 on a
       flat surface, and in float32 its sign is rounding noise on gentle waves
-      (`tests/test_objectives.py` shows both).
-    - `"plane"`: `s = sign((c . m) (m . (PL x t_world)))` with `c = r x w_L` and the
-      plane normal `m = PL x PM`. On the curve `c` is parallel to `m`, so `sign(c . m)`
-      is as well-conditioned as `|c|`; it flips where `M` crosses the line `PL` (at
-      `M0`), and so does `sign(m . (PL x t))`, so their product is continuous there.
-      The result is a sign that is exact away from rounding distance of the line `PL`,
-      continuous along the curve, and differs from the paper's by a factor that is
-      constant along any stretch where the paper's is well defined. The solvers use it.
+        (`tests/test_objectives.py` shows both), and it flips at `M0` where `M` crosses
+      the line `PL` even though `|r x w_L|` does not vanish there.
+    - `"plane"`: `s = sign((r x w_L) . (PL x n_s))`. On the curve `n_s` lies in the plane
+      through `P`, `L`, `M` (that is the coplanarity constraint), so `PL x n_s` is a
+      normal of that plane, like `r x w_L`; unlike the conic tangent it is continuous
+      along the whole curve (through `M0` too) and far from zero unless the normal is
+      parallel to `PL`. `f` then changes sign at its zeros, and spuriously only where
+      `n_s` is parallel to `PL` (possible on strongly curved triangles). The solvers
+      refine with it.
+    - `"line"`: `s = sign((r x w_L) . (PL x PM))`, also a normal of that plane; it
+      flips spuriously only where `M` crosses the line `PL` (at `M0`). A true root
+      flips both "plane" and "line"; the walk brackets only where both flip.
 
     Under total internal reflection `r = 0` and the formula gives `f = 0`, which is *not*
     a solution: the status says so, and solvers must read it.
@@ -77,12 +81,11 @@ def signed_sine_and_status(
         ref = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
         s = jnp.where(dot(ref, c) >= 0, 1, -1).astype(c.dtype)
     elif orientation == "plane":
-        t_world = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
-        m = jnp.cross(L - P, M - P)
-        flip = dot(m, jnp.cross(L - P, t_world))
-        s = jnp.where((dot(c, m) >= 0) == (flip >= 0), 1, -1).astype(c.dtype)
+        s = jnp.where(dot(c, jnp.cross(L - P, n_s)) >= 0, 1, -1).astype(c.dtype)
+    elif orientation == "line":
+        s = jnp.where(dot(c, jnp.cross(L - P, M - P)) >= 0, 1, -1).astype(c.dtype)
     else:
-        raise ValueError(f"orientation must be 'tangent' or 'plane', got {orientation!r}")
+        raise ValueError(f"orientation must be 'tangent', 'plane' or 'line', got {orientation!r}")
     f = s * norm(c)
     tir = dot(r, r) == 0
     status = jnp.where(

@@ -64,7 +64,7 @@ class WalkOptions(NamedTuple):
     tol: float | None = None
     max_steps: int = 512
     bracket: str = "illinois"
-    ellipse_samples: int = 32
+    ellipse_samples: int = 64
 
 
 def default_tol(dtype) -> float:
@@ -168,19 +168,29 @@ def _pencil_point(coef, anchor, tau, perp, phi):
 
 
 def _f(V, N, P, L, ab, eta):
-    """`f` and status at the points `ab` `(k, 2)` of one triangle, as one batched call.
+    """`f`, status, and `f` under the "line" orientation at points `ab` `(k, 2)`, batched.
 
     One call site per step keeps the compiled program small (XLA compile time grows with
     every inlined copy). The plane orientation: the paper's tangent sign is rounding noise
     on gentle waves (`signed_sine_and_status`).
     """
-    return jax.vmap(lambda x: signed_sine_and_status(V, N, P, L, x, eta, orientation="plane"))(ab)
+    def one(x):
+        f, st = signed_sine_and_status(V, N, P, L, x, eta, orientation="plane")
+        g, _ = signed_sine_and_status(V, N, P, L, x, eta, orientation="line")
+        return f, st, g
+
+    return jax.vmap(one)(ab)
 
 
 def _cos_at_P(V, N, P, L, ab):
     """`-w_P . n_s` at points `ab` `(k, 2)`: the cosine of incidence on P's side."""
     _, n_s, w_P, _, _ = path_vectors(V, N, P, L, ab)
     return -jnp.sum(w_P * n_s, axis=-1)
+
+
+def _root_between(fg1, fg2):
+    """A sign change of `f` in both orientations: a root, not an orientation flip."""
+    return _opposite(fg1[0], fg2[0]) & _opposite(fg1[1], fg2[1])
 
 
 def _opposite(f1, f2):
@@ -195,9 +205,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     singular = jnp.linalg.norm(t0) == 0
     roots = _edge_roots(coef)
 
-    # The paper's sign of f flips as M crosses the line PL, i.e. at M0; the "plane"
-    # orientation is continuous there but its sign is rounding noise within rounding
-    # distance of M0, so each direction starts its bracket a little off M0.
+    # The paper's sign of f flips at M0 (where M crosses the line PL); the "plane"
+    # orientation does not, but each direction still starts its bracket a little off M0
+    # so that the two brackets share no end point.
     delta0 = 1e4 * float(np.finfo(dtype).eps)
     dirs = []
     for s in (1.0, -1.0):
@@ -218,16 +228,19 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     phis = jnp.pi * jnp.arange(1, n_ellipse, dtype=dtype) / n_ellipse
     pts, pts_ok = jax.vmap(lambda p: _pencil_point(coef, ab0, tau_e, perp_e, p))(phis)
 
-    f_all, st_all = _f(V, N, P, L, jnp.concatenate([jnp.stack([ab0, abp, abm, nearp, nearm]), pts]), eta)
+    f_all, st_all, g_all = _f(V, N, P, L, jnp.concatenate([jnp.stack([ab0, abp, abm, nearp, nearm]), pts]), eta)
+    gp, gm, gsp, gsm = g_all[1], g_all[2], g_all[3], g_all[4]
     f0, fp, fm, fsp, fsm = f_all[:5]
     st0, stp, stm = st_all[0], st_all[1], st_all[2]
     # No room for a near point: f is continuous, so the exit's sign stands for the arc.
     fsp = jnp.where(okp & (roomp < 4 * delta0), fp, fsp)
     fsm = jnp.where(okm & (roomm < 4 * delta0), fm, fsm)
+    gsp = jnp.where(okp & (roomp < 4 * delta0), gp, gsp)
+    gsm = jnp.where(okm & (roomm < 4 * delta0), gm, gsm)
 
     OK = ObjectiveStatus.OK
-    br_p = okp & _opposite(fsp, fp) & (stp == OK) & (st_all[3] == OK)
-    br_m = okm & _opposite(fsm, fm) & (stm == OK) & (st_all[4] == OK)
+    br_p = okp & _root_between((fsp, gsp), (fp, gp)) & (stp == OK) & (st_all[3] == OK)
+    br_m = okm & _root_between((fsm, gsm), (fm, gm)) & (stm == OK) & (st_all[4] == OK)
     use_m_bracket = br_m & (~br_p | (phim < phip))
     # Walk direction without a bracket: out of total internal reflection first (towards
     # the larger cosine at P's side), else towards the smaller |f|.
@@ -236,9 +249,18 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     prefer_m = jnp.where(tirp != tirm, tirp, jnp.where(tirp, cos_m > cos_p, jnp.abs(fm) < jnp.abs(fp)))
     walk_m = okm & (~okp | prefer_m)
 
-    fs, sts = f_all[5:], st_all[5:]
-    phis_all, fs_all, ok_all = phis, fs, pts_ok & (sts == ObjectiveStatus.OK)
-    change = _opposite(fs_all[:-1], fs_all[1:]) & ok_all[:-1] & ok_all[1:]
+    # The ellipse from just after M0 (near point of +t0) to just before it (near point
+    # of -t0), so that no stretch of the curve is left out.
+    v = nearm - ab0
+    phi_nm = jnp.arctan2(v @ perp_e, v @ tau_e)
+    phi_nm = jnp.where(phi_nm < 0, phi_nm + jnp.pi, phi_nm)
+    phis_all = jnp.concatenate([phisp[None], phis, phi_nm[None]])
+    pts = jnp.concatenate([nearp[None], pts, nearm[None]])
+    fs_all = jnp.concatenate([fsp[None], f_all[5:], fsm[None]])
+    gs = jnp.concatenate([gsp[None], g_all[5:], gsm[None]])
+    sts = jnp.concatenate([st_all[3:4], st_all[5:], st_all[4:5]])
+    ok_all = jnp.concatenate([jnp.ones(1, bool), pts_ok, jnp.ones(1, bool)]) & (sts == ObjectiveStatus.OK)
+    change = _root_between((fs_all[:-1], gs[:-1]), (fs_all[1:], gs[1:])) & ok_all[:-1] & ok_all[1:]
     j = jnp.argmax(change)
     ellipse_bracket = change[j]
 
@@ -297,7 +319,7 @@ def _walk_geometry(mesh, coef, g, k_in, t_in, e):
     return side, tau, perp, ok, k, tt, ab, phi
 
 
-def _walk_update(s: _State, g, e, geometry, f2, st2, tol) -> _State:
+def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     """Cross into `g`; bracket if f changes sign on its arc, else schedule the next crossing."""
     side, tau, perp, ok, k, tt, ab, phi = geometry
     left = g < 0
@@ -305,7 +327,7 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, tol) -> _State:
     e_ok, x_ok = st_e == ObjectiveStatus.OK, stx == ObjectiveStatus.OK
     found_e = e_ok & (jnp.abs(f_e) <= tol)
     found_x = ok & x_ok & (jnp.abs(fx) <= tol)
-    bracket = ok & e_ok & x_ok & _opposite(f_e, fx)
+    bracket = ok & e_ok & x_ok & _root_between((f_e, g2[0]), (fx, g2[1]))
     lost = ~ok | (side == 0)
     # Walking out of the region where light from P can leave into total internal
     # reflection: no root ahead on this branch. (Inside it, keep walking: f is undefined.)
@@ -419,8 +441,8 @@ def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     p, phi, ok = _bisect_geometry(coef, s, illinois)
     ab_x = walk_geo[6]
     pts = jnp.where(walking, jnp.stack([e, ab_x]), jnp.stack([p, p]))
-    f2, st2 = _f(V, N, P, L, pts, eta)
-    walked = _walk_update(s, g, e, walk_geo, f2, st2, tol)
+    f2, st2, g2 = _f(V, N, P, L, pts, eta)
+    walked = _walk_update(s, g, e, walk_geo, f2, st2, g2, tol)
     refined = _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
     return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
 
