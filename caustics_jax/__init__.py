@@ -30,7 +30,6 @@ from .objectives import (
     signed_sine,
     signed_sine_and_status,
 )
-
 from .solvers import Solution, Status, solve
 from .start_points import start_points
 

@@ -13,7 +13,7 @@ from ..barycentric import barycentric_point
 from ..mesh import SurfaceMesh
 from ..start_points import start_points
 from ._solution import Solution, Status
-from .walk import WalkOptions, walk_lane
+from .walk import WalkOptions, default_tol, walk_lane
 
 METHODS = ("walk", "newton", "exhaustive")
 
@@ -33,7 +33,8 @@ def _validate(mesh, P, L, eta, method):
             raise ValueError(f"{name} must be numeric, got dtype {X.dtype}")
         bad = ~np.all(np.isfinite(X), axis=-1)
         if np.any(bad):
-            raise ValueError(f"{name} has NaN or Inf coordinates at rows {np.nonzero(bad.reshape(-1))[0][:10].tolist()}")
+            rows = np.nonzero(bad.reshape(-1))[0][:10].tolist()
+            raise ValueError(f"{name} has NaN or Inf coordinates at rows {rows}")
         out.append(X)
     try:
         P, L = np.broadcast_arrays(out[0].reshape(-1, 3) if out[0].ndim == 1 else out[0],
@@ -75,9 +76,12 @@ def bucketed(mesh: SurfaceMesh) -> SurfaceMesh:
 
 
 @functools.partial(jax.jit, static_argnames=("options",))
-def _walk_batch(mesh, P, L, face, ab0, found, eta, options: WalkOptions) -> Solution:
+def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps,
+                options: WalkOptions) -> Solution:
     eta = jnp.asarray(eta, mesh.dtype)
-    states = jax.vmap(lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options))(
+    tol = jnp.asarray(tol, mesh.dtype)
+    states = jax.vmap(
+        lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps))(
         P, L, face, ab0, found)
     V, N = mesh.triangle(states.face)
     from ..objectives import signed_sine
@@ -129,7 +133,10 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
         if opts.max_steps < 1 or opts.ellipse_samples < 2:
             raise ValueError("max_steps must be >= 1 and ellipse_samples >= 2")
         face, ab0, found = start if start is not None else start_points(mesh, P, L)
-        return _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, opts)
+        tol = opts.tol if opts.tol is not None else default_tol(mesh.dtype)
+        static = opts._replace(tol=None, max_steps=0)  # traced: one compile for any value
+        return _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
+                           jnp.int32(opts.max_steps), static)
     if method == "newton":
         from .newton import solve_newton
 

@@ -102,9 +102,8 @@ class _State(NamedTuple):
     crossed: jax.Array
 
 
-def _newton_lane(mesh, P, L, face, ab0, found, eta, options: NewtonOptions):
+def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, options: NewtonOptions):
     dtype = mesh.dtype
-    tol = options.tol if options.tol is not None else default_tol(dtype)
     solver = _make_solver(options.solver, tol)
     residual = CONSTRAINTS[options.constraint]
     slack = 64 * jnp.finfo(dtype).eps
@@ -148,7 +147,7 @@ def _newton_lane(mesh, P, L, face, ab0, found, eta, options: NewtonOptions):
                                    Status.NO_CROSSING).astype(jnp.int32),
                   done=~found | at_m0, patches=jnp.asarray(0, jnp.int32),
                   steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32))
-    s = jax.lax.while_loop(lambda s: ~s.done & (s.patches < options.max_patches), step, init)
+    s = jax.lax.while_loop(lambda s: ~s.done & (s.patches < max_patches), step, init)
     f_end, st_end = f_at(s.face, s.ab)
     status = jnp.where((s.status == Status.MAX_STEPS) & (st_end == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION),
                        Status.TOTAL_INTERNAL_REFLECTION, s.status)
@@ -156,8 +155,10 @@ def _newton_lane(mesh, P, L, face, ab0, found, eta, options: NewtonOptions):
 
 
 @functools.partial(jax.jit, static_argnames=("options",))
-def _newton_batch(mesh, P, L, face, ab0, found, eta, options: NewtonOptions) -> Solution:
+def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
+                  options: NewtonOptions) -> Solution:
     eta = jnp.asarray(eta, mesh.dtype)
+    tol = jnp.asarray(tol, mesh.dtype)
     n = P.shape[0]
     if options.n_starts > 1:
         key = jax.random.PRNGKey(options.seed)
@@ -165,7 +166,7 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, options: NewtonOptions) -> 
         starts = jnp.concatenate([ab0[:, None], w[..., 1:]], axis=1)  # (n, S, 2)
     else:
         starts = ab0[:, None]
-    lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, options)  # noqa: E731
+    lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, tol, max_patches, options)  # noqa: E731
     per_start = jax.vmap(lambda a: jax.vmap(lane)(P, L, face, a, found), in_axes=1, out_axes=1)
     states, f_end = per_start(starts)  # leaves (n, S, ...)
     V, N = mesh.triangle(states.face)
@@ -210,4 +211,7 @@ def solve_newton(mesh, P, L, eta, *, start=None, **options) -> Solution:
         # with x64 on it mixes float64 into a float32 solve and lineax rejects it.
         raise ValueError(f"solver={opts.solver!r} needs float64 or jax_enable_x64 off in float32")
     face, ab0, found = start if start is not None else start_points(mesh, P, L)
-    return _newton_batch(bucketed(mesh), P, L, face, ab0, found, eta, opts)
+    tol = opts.tol if opts.tol is not None else default_tol(mesh.dtype)
+    static = opts._replace(tol=None, max_patches=0)  # traced: one compile for any value
+    return _newton_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
+                         jnp.int32(opts.max_patches), static)

@@ -447,10 +447,13 @@ def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
 
 
-def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptions):
-    """Walk one lane (vmapped by `walk`); returns the final `_State`."""
-    dtype = mesh.dtype
-    tol = options.tol if options.tol is not None else default_tol(dtype)
+def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptions,
+              tol, max_steps):
+    """Walk one lane (vmapped by `solve`); returns the final `_State`.
+
+    `tol` and `max_steps` are traced (a sweep over them compiles once); the rest of
+    `options` is static.
+    """
     state = _first_triangle(mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples)
     illinois = options.bracket == "illinois"
 
@@ -459,6 +462,6 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptio
         return jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
 
     state = jax.lax.while_loop(
-        lambda s: (s.mode != DONE) & (s.steps < options.max_steps), body, state)
+        lambda s: (s.mode != DONE) & (s.steps < max_steps), body, state)
     capped = state.mode != DONE
     return state._replace(status=jnp.where(capped, Status.MAX_STEPS, state.status).astype(jnp.int32))
