@@ -18,8 +18,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --hypothesis-profile=ci
 
+# Every experiment's figure (the start-point sweep builds a 1M-triangle scene: minutes).
 figures: $(STAMP)
 	$(PY) -m experiments.conic_curve
+	$(PY) -m experiments.float32_audit
+	$(PY) -m experiments.kernel_approximations
+	$(PY) -m experiments.start_point_throughput
+	$(VENV)/bin/caustics-jax demo
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check caustics_jax experiments tests

@@ -295,3 +295,35 @@ def test_quadratic_solver_never_returns_nan_or_inf(dtype):
     roots, valid = solve_quadratic(*(jnp.asarray(g[:, i]) for i in range(3)))
     assert np.all(np.isfinite(np.asarray(roots)))
     assert not np.any(np.asarray(valid)[np.all(g == 0, -1)])  # 0 = 0 has no isolated root
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_a_root_at_a_vertex_belongs_to_both_edges_and_the_window_is_64_eps(dtype):
+    """MATH.md §3 tolerance policy: roots within `64 eps` outside [0, 1] are kept and clamped
+    (so a curve through a vertex is reported on both edges that meet there); roots further
+    out are dropped."""
+    rng = np.random.default_rng(5)
+    n = 512
+    eps = float(np.finfo(dtype).eps)
+    coef = rng.normal(size=(n, 6))
+    A, B, C, D, E = coef[:, :5].T
+    # F so that the conic passes exactly through vertex V1 = (a, b) = (1, 0) (float64 exact
+    # enough: A + D + F = 0). V1 is edge 0 at t = 1 and edge 1 at t = 0.
+    coef[:, 5] = -(A + D)
+    # keep well-conditioned crossings: |dQ/dt| along both edges at V1 not small
+    slope0, slope1 = np.abs(2 * A + D), np.abs(-2 * A - D + C + E)
+    keep = (slope0 > 0.3) & (slope1 > 0.3)
+    t, valid = (np.asarray(x) for x in edges_j(jnp.asarray(coef[keep], dtype)))
+    near = lambda k, target: np.any(valid[:, k] & (np.abs(t[:, k] - target) <= 100 * eps), -1)  # noqa: E731
+    assert keep.sum() > 100
+    assert np.all(near(0, 1.0)), "root at V1 missing on edge 0 (t = 1)"
+    assert np.all(near(1, 0.0)), "root at V1 missing on edge 1 (t = 0)"
+    # Edge 0 (b = 0): A a^2 + D a + F with roots 1 + delta and -3, other coefficients random.
+    for delta, kept in ((8 * eps, True), (-8 * eps, True), (1e3 * eps, False), (1e-2, False)):
+        r1, r2 = 1.0 + delta, -3.0
+        c = rng.normal(size=(64, 6))
+        c[:, 0], c[:, 3], c[:, 5] = 1.0, -(r1 + r2), r1 * r2
+        t, valid = (np.asarray(x) for x in edges_j(jnp.asarray(c, dtype)))
+        hit = np.any(valid[:, 0] & (np.abs(t[:, 0] - 1.0) <= 16 * eps), -1)
+        assert np.all(hit == kept), (delta, hit.mean())
+        assert np.all((t >= 0) & (t <= 1))
