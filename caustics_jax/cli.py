@@ -1,0 +1,153 @@
+"""`caustics-jax`: the command line (`compare`, `demo`).
+
+    caustics-jax demo                      # solver comparison on the default wavy pool
+    caustics-jax compare --n 20000 --dtype float32 --configs walk newton-hv --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from . import compare as cmp
+
+DEFAULT_FIGURE = Path("figures") / "solver_comparison.png"
+
+
+def _fmt(x, spec=".2e"):
+    return "-" if x is None or x != x else format(x, spec)
+
+
+def format_table(report: dict) -> str:
+    """The comparison as a fixed-width text table, one row per configuration and dtype."""
+    head = (f"{'config':<16}{'dtype':<9}{'success':>8}{'@M0':>7}{'found':>8}"
+            f"{'pos med':>10}{'pos p99':>10}{'pos max':>10}{'ang med':>10}{'ang p99':>10}"
+            f"{'ang max':>10}{'it med':>7}{'it p99':>7}{'compile':>9}{'solves/s':>11}")
+    lines = [f"scene {report['scene']}, {report['n']} lanes "
+             f"({report['lanes_crossing_surface']} cross the surface), "
+             f"backend {report['platform']}", head, "-" * len(head)]
+    for r in report["rows"]:
+        pos = r["position_error_m"] or {}
+        ang = r["angle_error_rad"]
+        lines.append(
+            f"{r['config']:<16}{r['dtype']:<9}{_fmt(r['success'], '.4f'):>8}"
+            f"{_fmt(r['nearest_M0'], '.3f'):>7}{r['found']:>8.4f}"
+            f"{_fmt(pos.get('median')):>10}{_fmt(pos.get('p99')):>10}{_fmt(pos.get('max')):>10}"
+            f"{_fmt(ang['median']):>10}{_fmt(ang['p99']):>10}{_fmt(ang['max']):>10}"
+            f"{r['iterations']['median']:>7.0f}{r['iterations']['p99']:>7.0f}"
+            f"{r['compile_s']:>8.1f}s{r['solves_per_s']:>11.0f}")
+    ref = report["reference"]
+    lines.append("")
+    if ref:
+        lines.append(f"success and position error (m) against the exhaustive float64 reference on "
+                     f"{ref['lanes']} lanes (solutions per lane: {ref['solutions_per_lane']}); "
+                     "@M0: returned the solution nearest M0")
+    lines.append("angle error (rad): refraction-angle error of every found lane, float64 check; "
+                 "compile: first call minus a steady call")
+    for q in cmp.ratios(report):
+        lines.append(f"[{q['dtype']}] walk / best Newton ({q['best_newton']}) throughput ratio: "
+                     f"{q['speed_ratio']:.2f}")
+    return "\n".join(lines)
+
+
+def plot(report: dict, path: Path) -> None:
+    """Pareto figure: time per solve against error and success, per configuration and dtype."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sweep = report["sweep"]
+    configs = list(dict.fromkeys(r["config"] for r in sweep))
+    colors = dict(zip(configs, plt.rcParams["axes.prop_cycle"].by_key()["color"], strict=False))
+    styles = {"float32": ("o", "-"), "float64": ("s", "--")}
+    fig, (ax_err, ax_ok) = plt.subplots(1, 2, figsize=(13, 5.2))
+    for name in configs:
+        for dtype, (marker, ls) in styles.items():
+            rows = [r for r in sweep if r["config"] == name and r["dtype"] == dtype]
+            if not rows:
+                continue
+            t = [r["us_per_solve"] for r in rows]
+            e = [max(r["angle_error_rad"]["p99"], 1e-17) for r in rows]
+            ax_err.plot(t, e, ls, marker=marker, color=colors[name], label=f"{name} {dtype}")
+            ax_ok.plot(t, [100 * r["found"] for r in rows], ls, marker=marker,
+                       color=colors[name], label=f"{name} {dtype}")
+            for r, x, y in zip(rows, t, e, strict=True):
+                ax_err.annotate(f"{r['tol']:.0e}", (x, y), fontsize=6, alpha=0.7,
+                                xytext=(3, 2), textcoords="offset points")
+    n = sweep[0]["n"] if sweep else 0
+    ax_err.set(xscale="log", yscale="log", xlabel="wall time per solve (µs, CPU, batched)",
+               ylabel="p99 refraction-angle error of found lanes (rad)",
+               title="Error against run time over the acceptance tolerance (labels)")
+    ax_ok.set(xscale="log", xlabel="wall time per solve (µs, CPU, batched)",
+              ylabel="lanes with a solution found (%)",
+              title="Success against run time (same sweep)")
+    for ax in (ax_err, ax_ok):
+        ax.grid(True, which="both", alpha=0.3)
+    ax_ok.legend(fontsize=7, loc="lower right")
+    fig.suptitle(f"Solver comparison on {report['scene']}, {n} lanes per point, "
+                 f"backend {report['platform']}", fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def _compare(args) -> int:
+    cfg = cmp.CompareConfig(
+        scene=args.scene, n_triangles=args.triangles, n=args.n, dtypes=tuple(args.dtype),
+        configs=tuple(args.configs), ref_n=args.ref_n, sweep_n=args.sweep_n,
+        sweep=not args.no_sweep, repeats=args.repeats, eta=args.eta, seed=args.seed)
+    try:
+        report = cmp.run(cfg)
+    except ValueError as exc:
+        print(f"caustics-jax compare: {exc}", file=sys.stderr)
+        return 2
+    print(format_table(report))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(report, indent=1, default=str))
+        print(f"wrote {args.json}")
+    if report["sweep"] and args.figure != "none":
+        plot(report, Path(args.figure))
+        print(f"wrote {args.figure}")
+    return 0
+
+
+def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
+    p.add_argument("--scene", default="wavy", choices=sorted(cmp.SCENES))
+    p.add_argument("--triangles", type=int, default=8192, help="surface tessellation")
+    p.add_argument("--n", type=int, default=100_000, help="receiver lanes")
+    p.add_argument("--dtype", nargs="+", default=["float32", "float64"],
+                   choices=["float32", "float64"])
+    p.add_argument("--configs", nargs="+", default=list(cmp.DEFAULT_CONFIGS),
+                   help=f"solver configurations, of {sorted(cmp.CONFIGS)}")
+    p.add_argument("--ref-n", type=int, default=1024,
+                   help="lanes checked against the exhaustive reference (0: none)")
+    p.add_argument("--sweep-n", type=int, default=8192, help="lanes per Pareto sweep point")
+    p.add_argument("--no-sweep", action="store_true", help="skip the tolerance sweep and figure")
+    p.add_argument("--repeats", type=int, default=3, help="timed calls per measurement")
+    p.add_argument("--eta", type=float, default=1.333)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", default="figures/solver_comparison.json" if demo else None,
+                   help="write the full results as JSON here")
+    p.add_argument("--figure", default=str(DEFAULT_FIGURE),
+                   help="Pareto figure path ('none' to skip)")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="caustics-jax", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_compare_args(sub.add_parser(
+        "compare", help="solver comparison: table, optional JSON and Pareto figure"), demo=False)
+    _add_compare_args(sub.add_parser(
+        "demo", help="the main job: compare on the default wavy pool, write the figure"),
+        demo=True)
+    args = parser.parse_args(argv)
+    return _compare(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,285 @@
+"""The solver comparison job behind `caustics-jax compare` and `make demo`.
+
+One run measures, per solver configuration and dtype, on the same scene and receivers:
+
+- success rate against the exhaustive float64 reference (`method="exhaustive"`) on a
+  subset of the receivers (`ref_n` lanes, mesh up to `MAX_REFERENCE_FACES` triangles):
+  the fraction of lanes with at least one solution where the solver returned one, and
+  the fraction where it returned the one nearest the start point `M0`;
+- position error (m) of each returned point against the nearest reference solution (on
+  the reference subset) and refraction-angle error (rad) of every found lane, evaluated
+  in float64 on the float64 mesh (`testing.refraction_angle_error`), so float32 lanes
+  are charged for their rounding too;
+- iterations (walk: triangle crossings plus refinement steps; Newton: optimistix steps
+  over all patches and starts), compile time (first call minus a steady call) and
+  throughput (lanes / median wall time of `repeats` steady calls, start points
+  included);
+- a Pareto sweep: the same measurements on a smaller lane subset over several
+  acceptance tolerances; tolerances and iteration caps are traced arguments of the
+  solvers, so a sweep compiles once per configuration.
+
+Timings are only comparable within one run (same machine, same load): report ratios.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from collections.abc import Callable
+
+import jax
+import numpy as np
+
+from . import scenes
+from ._precision import precision
+from .solvers import solve
+from .solvers.walk import default_tol
+from .start_points import start_points
+from .testing import refraction_angle_error
+
+MAX_REFERENCE_FACES = 20_000
+
+# name -> (method, options). "best optimistix Newton" is chosen among the newton-* rows.
+CONFIGS: dict[str, tuple[str, dict]] = {
+    "walk": ("walk", {}),
+    "walk-bisection": ("walk", {"bracket": "bisection"}),
+    "newton-hv": ("newton", {"solver": "newton", "constraint": "half_vector"}),
+    "newton-ad": ("newton", {"solver": "newton", "constraint": "angle_difference"}),
+    "chord-hv": ("newton", {"solver": "chord", "constraint": "half_vector"}),
+    "lm-hv": ("newton", {"solver": "levenberg_marquardt", "constraint": "half_vector"}),
+    "dogleg-hv": ("newton", {"solver": "dogleg", "constraint": "half_vector"}),
+    "newton-hv-sms4": ("newton", {"solver": "newton", "constraint": "half_vector", "n_starts": 4}),
+}
+DEFAULT_CONFIGS = ("walk", "newton-hv", "newton-ad", "lm-hv")
+SCENES: dict[str, Callable] = {
+    "wavy": lambda n, dt: scenes.wavy_pool(n, dtype=dt),
+    "wavy_steep": lambda n, dt: scenes.wavy_pool(n, amplitude=0.08, dtype=dt),
+    "wavy_jittered": lambda n, dt: scenes.wavy_pool(n, choppiness=0.5, dtype=dt),
+    "flat": lambda n, dt: scenes.flat_pool(n, dtype=dt),
+    "lagoon": lambda n, dt: scenes.lagoon(n, dtype=dt),
+}
+# Acceptance tolerances of the Pareto sweep (|f| = sine of the angle error), per dtype;
+# float32 stops at 1e-6, the noise floor of f in float32 (docs/kernels.md, float32 audit).
+SWEEP_TOLS = {"float32": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
+              "float64": (1e-2, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12)}
+
+
+@dataclasses.dataclass
+class CompareConfig:
+    """What to compare. `n` receivers on a regular floor grid of the scene, lights as the scene."""
+
+    scene: str = "wavy"
+    n_triangles: int = 8192
+    n: int = 100_000
+    dtypes: tuple[str, ...] = ("float32", "float64")
+    configs: tuple[str, ...] = DEFAULT_CONFIGS
+    ref_n: int = 1024
+    sweep_n: int = 8192
+    sweep: bool = True
+    repeats: int = 3
+    eta: float = 1.333
+    seed: int = 0
+
+    def validate(self) -> None:
+        if self.scene not in SCENES:
+            raise ValueError(f"scene must be one of {sorted(SCENES)}, got {self.scene!r}")
+        unknown = [c for c in self.configs if c not in CONFIGS]
+        if unknown:
+            raise ValueError(f"unknown solver configs {unknown}; known: {sorted(CONFIGS)}")
+        bad = [d for d in self.dtypes if d not in ("float32", "float64")]
+        if bad:
+            raise ValueError(f"dtypes must be float32 and/or float64, got {bad}")
+        if self.n < 1 or self.ref_n < 0 or self.sweep_n < 1 or self.repeats < 1:
+            raise ValueError("n, sweep_n and repeats must be >= 1 and ref_n >= 0")
+        if self.n_triangles < 8:
+            raise ValueError(f"n_triangles must be >= 8, got {self.n_triangles}")
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _scene_arrays(cfg: CompareConfig):
+    """The float64 scene, `n` receivers (floor grid) and their light endpoints, as numpy."""
+    side = int(np.ceil(np.sqrt(cfg.n)))
+    sc = SCENES[cfg.scene](cfg.n_triangles, "float64")
+    lo = np.asarray(sc.surface.vertices)[:, :2].min(0)
+    hi = np.asarray(sc.surface.vertices)[:, :2].max(0)
+    depth = float(np.asarray(sc.receivers)[0, 2])
+    u = (np.arange(side) + 0.5) / side
+    X, Y = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]), indexing="xy")
+    P = np.stack([X.ravel(), Y.ravel(), np.full(side * side, depth)], -1)
+    P = P[np.linspace(0, len(P) - 1, cfg.n).astype(int)]  # n lanes spread over the grid
+    L = np.asarray(sc.lights.endpoint(P, 0))
+    mesh = sc.surface
+    ref_mesh = _NumpyMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces),
+                          np.asarray(mesh.normals))
+    return sc, ref_mesh, P, L
+
+
+@dataclasses.dataclass
+class _NumpyMesh:
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+
+
+def _timed(fn, repeats: int):
+    t = time.perf_counter()
+    out = jax.block_until_ready(fn())
+    first = time.perf_counter() - t
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t)
+    steady = float(np.median(times))
+    return out, max(first - steady, 0.0), steady
+
+
+def _errors(sol, ref_mesh, P, L, eta, ref):
+    """Angle errors of found lanes; position errors and success on the reference subset."""
+    found = np.asarray(sol.found)
+    tri = np.asarray(sol.triangle)
+    ab = np.asarray(sol.barycentric, np.float64)
+    angle = refraction_angle_error(ref_mesh, tri[found], ab[found], P[found], L[found], eta)
+    out = {"found": float(found.mean()), "angle": angle}
+    if ref is not None:
+        idx, pts, count = ref["idx"], ref["all_points"], ref["count"]
+        has = count > 0
+        f_ref = found[idx]
+        V = ref_mesh.vertices[ref_mesh.faces[np.maximum(tri[idx], 0)]]
+        M = V[:, 0] + ab[idx, :1] * (V[:, 1] - V[:, 0]) + ab[idx, 1:] * (V[:, 2] - V[:, 0])
+        d = np.linalg.norm(pts - M[:, None], axis=-1)
+        d = np.where(np.arange(pts.shape[1])[None] < count[:, None], d, np.inf)
+        nearest = d.min(1)
+        out["position"] = nearest[f_ref & has]
+        out["success"] = float((f_ref & has).sum() / max(has.sum(), 1))
+        # returned the reference solution nearest M0 (within 1e-4 m, float32 rounding included)
+        same = np.argmin(d, 1) == ref["nearest_M0"]
+        out["nearest_M0"] = float((f_ref & has & same & (nearest < 1e-4)).sum() / max(has.sum(), 1))
+        out["spurious"] = int((f_ref & ~has).sum())
+    return out
+
+
+def _stats(x):
+    x = np.asarray(x, np.float64)
+    if x.size == 0:
+        return {"median": float("nan"), "p99": float("nan"), "max": float("nan")}
+    return {"median": float(np.median(x)), "p99": float(np.quantile(x, 0.99)),
+            "max": float(x.max())}
+
+
+def reference(cfg: CompareConfig, sc, P, L):
+    """Exhaustive float64 solutions on `ref_n` lanes (None when the mesh is too large)."""
+    F = sc.surface.faces.shape[0]
+    if cfg.ref_n == 0 or F > MAX_REFERENCE_FACES:
+        _log(f"no exhaustive reference: {F} faces > {MAX_REFERENCE_FACES} or ref_n = 0")
+        return None
+    rng = np.random.default_rng(cfg.seed + 1)
+    idx = np.sort(rng.choice(len(P), min(cfg.ref_n, len(P)), replace=False))
+    t = time.perf_counter()
+    ex = solve(sc.surface, P[idx], L[idx], eta=cfg.eta, method="exhaustive", return_all=True)
+    M0 = np.asarray(ex.solution.start_point)
+    d = np.linalg.norm(ex.all_points - M0[:, None], axis=-1)
+    d = np.where(np.arange(ex.all_points.shape[1])[None] < ex.count[:, None], d, np.inf)
+    _log(f"exhaustive reference: {len(idx)} lanes in {time.perf_counter() - t:.1f} s, "
+         f"solutions per lane {np.bincount(ex.count).tolist()}")
+    return {"idx": idx, "all_points": ex.all_points, "count": ex.count,
+            "nearest_M0": np.argmin(d, 1), "seconds": time.perf_counter() - t}
+
+
+def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps):
+    with precision(dtype):
+        mesh = sc64.surface.astype(dtype)
+        Pd, Ld = np.asarray(P, dtype), np.asarray(L, dtype)
+        for name in cfg.configs:
+            method, opts = CONFIGS[name]
+            _log(f"[{dtype}] {name}: {cfg.n} lanes ...")
+            t0 = time.perf_counter()
+            try:
+                sol, compile_s, steady = _timed(
+                    lambda m=method, o=opts: solve(mesh, Pd, Ld, eta=cfg.eta, method=m, **o),
+                    cfg.repeats)
+            except ValueError as exc:  # e.g. a solver unavailable in this dtype
+                _log(f"  skipped: {exc}")
+                continue
+            err = _errors(sol, ref_mesh, P, L, cfg.eta, ref)
+            it = np.asarray(sol.iterations)[np.asarray(sol.found)]
+            row = {
+                "config": name, "method": method, "options": opts, "dtype": dtype,
+                "n": cfg.n, "found": err["found"],
+                "success": err.get("success"), "nearest_M0": err.get("nearest_M0"),
+                "spurious": err.get("spurious"),
+                "angle_error_rad": _stats(err["angle"]),
+                "position_error_m": _stats(err["position"]) if "position" in err else None,
+                "iterations": {"median": float(np.median(it)) if it.size else float("nan"),
+                               "p99": float(np.quantile(it, 0.99)) if it.size else float("nan")},
+                "compile_s": compile_s, "seconds": steady, "solves_per_s": cfg.n / steady,
+                "status": sol.summary(), "tol": opts.get("tol", default_tol(dtype)),
+            }
+            results.append(row)
+            _log(f"  {row['solves_per_s']:.0f} solves/s, found {row['found']:.4f}, "
+                 f"compile {compile_s:.1f} s ({time.perf_counter() - t0:.0f} s)")
+            if cfg.sweep:
+                sweeps.extend(_sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh,
+                                     P, L))
+
+
+def _sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh, P, L):
+    n = min(cfg.sweep_n, len(P))
+    idx = np.linspace(0, len(P) - 1, n).astype(int)
+    out = []
+    for tol in SWEEP_TOLS[dtype]:
+        sol, _, steady = _timed(
+            lambda t=tol: solve(mesh, Pd[idx], Ld[idx], eta=cfg.eta, method=method,
+                                **{**opts, "tol": t}), max(1, cfg.repeats - 1))
+        err = _errors(sol, ref_mesh, P[idx], L[idx], cfg.eta, None)
+        out.append({"config": name, "dtype": dtype, "tol": tol, "n": n,
+                    "us_per_solve": 1e6 * steady / n, "found": err["found"],
+                    "angle_error_rad": _stats(err["angle"])})
+    _log(f"  sweep over {len(SWEEP_TOLS[dtype])} tolerances on {n} lanes done")
+    return out
+
+
+def run(cfg: CompareConfig) -> dict:
+    """Run the comparison; returns a JSON-serialisable dict (rows, sweep, reference)."""
+    cfg.validate()
+    with precision("float64"):
+        sc64, ref_mesh, P, L = _scene_arrays(cfg)
+        n_cross = int(np.asarray(start_points(sc64.surface, P, L)[2]).sum())
+        ref = reference(cfg, sc64, P, L)
+    results, sweeps = [], []
+    for dtype in cfg.dtypes:
+        _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps)
+    return {
+        "scene": sc64.name, "n": cfg.n, "lanes_crossing_surface": n_cross,
+        "config": {k: v for k, v in dataclasses.asdict(cfg).items()},
+        "reference": None if ref is None else {
+            "lanes": len(ref["idx"]), "seconds": ref["seconds"],
+            "solutions_per_lane": np.bincount(ref["count"]).tolist()},
+        "rows": results, "sweep": sweeps,
+        "platform": jax.default_backend(), "devices": [str(d) for d in jax.devices()],
+    }
+
+
+def _rank(row: dict):
+    return (row["success"] if row["success"] is not None else row["found"], row["solves_per_s"])
+
+
+def ratios(report: dict) -> list[dict]:
+    """Walk throughput over the best Newton configuration (best success, then speed), per dtype."""
+    out = []
+    for dtype in {r["dtype"] for r in report["rows"]}:
+        rows = [r for r in report["rows"] if r["dtype"] == dtype]
+        walk = [r for r in rows if r["config"] == "walk"]
+        newton = [r for r in rows if r["method"] == "newton"]
+        if not walk or not newton:
+            continue
+        best = max(newton, key=_rank)
+        out.append({"dtype": dtype, "best_newton": best["config"],
+                    "speed_ratio": walk[0]["solves_per_s"] / best["solves_per_s"],
+                    "walk_success": walk[0]["success"], "newton_success": best["success"]})
+    return sorted(out, key=lambda r: r["dtype"])
+
