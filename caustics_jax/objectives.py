@@ -57,8 +57,10 @@ def signed_sine_and_status(
       conic tangent (eq. 13-15) in world space. Ill-conditioned: `r`, `w_L` and the
       tangent all lie (nearly) in the plane through `P`, `L`, `M`, so `t . (r x w_L)` is
       proportional to how fast that plane turns along the curve; it is exactly 0 on a
-      flat surface, and in float32 its sign is rounding noise on gentle waves
-        (`tests/test_objectives.py` shows both), and it flips at `M0` where `M` crosses
+      flat surface (constant normals: `tests/test_objectives.py::
+      test_tangent_orientation_degenerates_with_constant_normals_while_plane_does_not`
+      measures it at rounding level), so in float32 its sign is noise on gentle waves,
+      and it flips at `M0` where `M` crosses
       the line `PL` even though `|r x w_L|` does not vanish there.
     - `"plane"`: `s = sign((r x w_L) . (PL x n_s))`. On the curve `n_s` lies in the plane
       through `P`, `L`, `M` (that is the coplanarity constraint), so `PL x n_s` is a

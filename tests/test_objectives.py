@@ -150,3 +150,40 @@ def test_degenerate_inputs_give_status_and_finite_values(dtype):
     grads = jax.grad(lambda ab: jnp.sum(objectives_j(*_cast(p, dtype)[:4], ab, p.eta)[1]))(
         jnp.asarray(p.ab, dtype))
     assert np.all(np.isfinite(np.asarray(grads)))
+
+
+def test_tangent_orientation_degenerates_with_constant_normals_while_plane_does_not():
+    """Why the solvers orient f by "plane", not by the paper's tangent (eq. 20-21).
+
+    With constant normals the curve is a line in the plane through P, L and n, and r, w_L
+    and the tangent all lie in that plane: `t . (r x w_L)` vanishes up to rounding, so the
+    paper's sign is noise. `(r x w_L) . (PL x n_s)` compares two normals of that plane and
+    stays of order one, and the "plane" f changes sign across the solution.
+    """
+    from caustics_jax import conic_tangent, refract, tangent_to_world
+    from caustics_jax.objectives import path_vectors
+
+    p = planted_paths(31, 512, normal_spread=0.0)
+    assert np.allclose(p.N, p.N[:, :1])  # constant normals: a line, not a conic
+    coef = conic_coefficients(*(jnp.asarray(x) for x in (p.V, p.N, p.P, p.L)))
+    ok = np.ones(len(p.ab), bool)
+    f_sides = []
+    for da in (-0.02, 0.02):
+        ab, ok_side = _points_on_curve_near(p, coef, da)
+        V, N, P, L, abj = (jnp.asarray(x) for x in (p.V, p.N, p.P, p.L, ab))
+        _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, abj)
+        c = np.asarray(jnp.cross(refract(-w_P, -n_s, p.eta), w_L))
+        t = np.asarray(tangent_to_world(V, conic_tangent(coef, abj)))
+        q = np.cross(p.L - p.P, np.asarray(n_s))
+        unit = lambda x: x / np.maximum(np.linalg.norm(x, axis=-1, keepdims=True), 1e-300)  # noqa: E731
+        tangent_cos = np.abs(np.sum(unit(t) * unit(c), -1))
+        plane_cos = np.abs(np.sum(unit(q) * unit(c), -1))
+        f, status = signed_sine_and_status(V, N, P, L, abj, p.eta, orientation="plane")
+        good = ok_side & (np.asarray(status) == ObjectiveStatus.OK)
+        ok &= good
+        assert np.max(tangent_cos[good]) < 1e-10  # measured max 4.8e-13 (rounding)
+        # measured min 1 - 3e-16: r x w_L and PL x n_s are the same plane normal
+        assert np.min(plane_cos[good]) > 0.999
+        f_sides.append(np.asarray(f))
+    assert ok.mean() > 0.9
+    assert np.all(f_sides[0][ok] * f_sides[1][ok] < 0)
