@@ -197,8 +197,13 @@ def _opposite(f1, f2):
     return jnp.sign(f1) * jnp.sign(f2) < 0
 
 
-def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
-    """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status."""
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse, flip):
+    """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status.
+
+    `flip` (traced bool) walks the other way from the one chosen below; also returns
+    whether that second way exists (a walk that started without a bracket, with an exit
+    in both directions).
+    """
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
     t0 = conic_tangent(coef, ab0)
@@ -248,6 +253,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     cos_p, cos_m = _cos_at_P(V, N, P, L, jnp.stack([abp, abm]))
     prefer_m = jnp.where(tirp != tirm, tirp, jnp.where(tirp, cos_m > cos_p, jnp.abs(fm) < jnp.abs(fp)))
     walk_m = okm & (~okp | prefer_m)
+    walk_m = jnp.where(flip, ~walk_m, walk_m)
 
     # The ellipse from just after M0 (near point of +t0) to just before it (near point
     # of -t0), so that no stretch of the curve is left out.
@@ -300,7 +306,8 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     mode = jnp.where(found, mode, DONE)
     status = jnp.where(found, status, Status.NO_CROSSING)
 
-    return _State(
+    can_flip = (mode == WALK) & okp & okm
+    return can_flip, _State(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
         exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
         anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
@@ -453,15 +460,33 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptio
 
     `tol` and `max_steps` are traced (a sweep over them compiles once); the rest of
     `options` is static.
+
+    When the first triangle holds no sign change, the walk picks one direction along the
+    curve (out of total internal reflection first, else towards the smaller `|f|`). If
+    that walk fails (TIR, boundary, lost curve, stalled bracket), it restarts once from
+    `M0` in the other direction, within the same `max_steps` budget. The paper walks one
+    way only; on steep waves the first choice is wrong for some lanes (the exhaustive
+    reference finds a solution behind `M0`), `test_walk_turns_back_when_the_first_direction_fails`.
     """
-    state = _first_triangle(mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples)
+    flips = jnp.array([False, True])
+    can_flip, starts = jax.vmap(
+        lambda fl: _first_triangle(mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples, fl)
+    )(flips)
+    state = jax.tree.map(lambda x: x[0], starts)
+    other = jax.tree.map(lambda x: x[1], starts)
+    can_flip = can_flip[0]
     illinois = options.bracket == "illinois"
 
-    def body(s):
+    def body(c):
+        s, turned = c
         nxt = _step(mesh, P, L, eta, tol, illinois, s)
-        return jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
+        nxt = jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
+        failed = (nxt.mode == DONE) & (nxt.status != Status.FOUND) & can_flip & ~turned
+        restart = other._replace(steps=nxt.steps, crossed=nxt.crossed)
+        nxt = jax.tree.map(lambda r, n: jnp.where(failed, r, n), restart, nxt)
+        return nxt, turned | failed
 
-    state = jax.lax.while_loop(
-        lambda s: (s.mode != DONE) & (s.steps < max_steps), body, state)
+    state, _ = jax.lax.while_loop(
+        lambda c: (c[0].mode != DONE) & (c[0].steps < max_steps), body, (state, jnp.asarray(False)))
     capped = state.mode != DONE
     return state._replace(status=jnp.where(capped, Status.MAX_STEPS, state.status).astype(jnp.int32))
