@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import equinox as eqx
@@ -13,6 +14,7 @@ from ..barycentric import barycentric_point
 from ..mesh import SurfaceMesh
 from ..start_points import start_points
 from ._solution import Solution, Status
+from .newton import newton_options, solve_newton
 from .walk import WalkOptions, default_tol, walk_lane
 
 METHODS = ("walk", "newton", "exhaustive")
@@ -53,14 +55,40 @@ def _bucket(n: int, minimum: int = 256) -> int:
     return max(minimum, 1 << (max(n, 1) - 1).bit_length())
 
 
+def lane_bucket(n: int) -> int:
+    """Lanes a batch is padded to: a power of two up to 4096 (at least 256), then a multiple
+    of 4096 (at most 4% extra work above 100k lanes), so jit compiles once per size class."""
+    return _bucket(n, 256) if n <= 4096 else -(-n // 4096) * 4096
+
+
+def _pad_lanes(P, L, start):
+    """Pad lanes with copies of lane 0 marked `found = False` (they end at once)."""
+    n = P.shape[0]
+    extra = lane_bucket(n) - n
+    if extra == 0:
+        return P, L, start
+
+    def pad(x, value=None):
+        fill = jnp.broadcast_to(x[:1] if value is None else jnp.asarray(value, x.dtype),
+                                (extra,) + x.shape[1:])
+        return jnp.concatenate([x, fill])
+
+    face, ab0, found = start
+    return pad(P), pad(L), (pad(face), pad(ab0), pad(found, False))
+
+
 def bucketed(mesh: SurfaceMesh) -> SurfaceMesh:
     """The mesh padded to power-of-two face and vertex counts, so jit compiles once per bucket.
 
-    Padding faces are `(0, 0, 0)` with no neighbours and are never referenced by a real
-    face's adjacency, so no walk can enter them; padding vertices are zeros.
+    The static `grid` layout is dropped. Padding faces are `(0, 0, 0)` with no neighbours
+    and are never referenced by a real face's adjacency, so no walk can enter them;
+    padding vertices are zeros.
     """
     F, V = mesh.faces.shape[0], mesh.vertices.shape[0]
     Fb, Vb = _bucket(F), _bucket(V)
+    # The solvers never read the grid layout (only start points do); as a static field it
+    # would make every pool size its own compile.
+    mesh = dataclasses.replace(mesh, grid=None)
     if (F, V) == (Fb, Vb):
         return mesh
 
@@ -103,6 +131,18 @@ def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps,
     )
 
 
+def _walk_options(**options) -> WalkOptions:
+    try:
+        opts = WalkOptions(**options)
+    except TypeError as exc:
+        raise ValueError(f"unknown walk option: {exc}") from exc
+    if opts.bracket not in ("illinois", "bisection"):
+        raise ValueError(f"bracket must be 'illinois' or 'bisection', got {opts.bracket!r}")
+    if opts.max_steps < 1 or opts.ellipse_samples < 2:
+        raise ValueError("max_steps must be >= 1 and ellipse_samples >= 2")
+    return opts
+
+
 def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", start=None,
           **options) -> Solution:
     """Find refraction points `M` of paths `P -> M -> L` through the surface (seed 001 §3.4).
@@ -116,31 +156,32 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
             "exhaustive" (all solutions, reference).
         start: optional precomputed `start_points(mesh, P, L)` result.
         **options: per method; "walk": `tol`, `max_steps`, `bracket`, `ellipse_samples`
-            (`WalkOptions`).
+            (`WalkOptions`); "newton": `solver`, `constraint`, `tol`, `inner_steps`,
+            `max_patches`, `n_starts`, `seed` (`NewtonOptions`); "exhaustive": `samples`,
+            `iters`, `tol`, `chunk`, `dedupe`, `return_all`.
+
+    Walk and Newton batches are padded to `lane_bucket(N)` lanes and meshes to
+    power-of-two sizes, so jit compiles once per size class.
 
     Returns a `Solution`; `status` holds `Status` codes and `found` is True exactly where a
     point with `|residual| <= tol` was returned. Bad input raises `ValueError` here,
     before any jitted work.
     """
     P, L, eta = _validate(mesh, P, L, eta, method)
+    if method == "exhaustive":
+        from .exhaustive import solve_exhaustive
+
+        return solve_exhaustive(mesh, P, L, eta, start=start, **options)
+    opts = _walk_options(**options) if method == "walk" else newton_options(mesh.dtype, **options)
+    n = P.shape[0]
+    start = start if start is not None else start_points(mesh, P, L)
+    P, L, start = _pad_lanes(P, L, start)
     if method == "walk":
-        try:
-            opts = WalkOptions(**options)
-        except TypeError as exc:
-            raise ValueError(f"unknown walk option: {exc}") from exc
-        if opts.bracket not in ("illinois", "bisection"):
-            raise ValueError(f"bracket must be 'illinois' or 'bisection', got {opts.bracket!r}")
-        if opts.max_steps < 1 or opts.ellipse_samples < 2:
-            raise ValueError("max_steps must be >= 1 and ellipse_samples >= 2")
-        face, ab0, found = start if start is not None else start_points(mesh, P, L)
+        face, ab0, found = start
         tol = opts.tol if opts.tol is not None else default_tol(mesh.dtype)
         static = opts._replace(tol=None, max_steps=0)  # traced: one compile for any value
-        return _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
-                           jnp.int32(opts.max_steps), static)
-    if method == "newton":
-        from .newton import solve_newton
-
-        return solve_newton(mesh, P, L, eta, start=start, **options)
-    from .exhaustive import solve_exhaustive
-
-    return solve_exhaustive(mesh, P, L, eta, start=start, **options)
+        sol = _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
+                          jnp.int32(opts.max_steps), static)
+    else:
+        sol = solve_newton(mesh, P, L, eta, start, opts)
+    return jax.tree.map(lambda x: x[:n], sol)

@@ -30,7 +30,6 @@ from ..objectives import (
     half_vector_residual,
     signed_sine_and_status,
 )
-from ..start_points import start_points
 from ._solution import Solution, Status
 from .walk import default_tol
 
@@ -191,10 +190,8 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
     )
 
 
-def solve_newton(mesh, P, L, eta, *, start=None, **options) -> Solution:
-    """`solve(..., method="newton")`: see the module docstring and `NewtonOptions`."""
-    from ._solve import bucketed
-
+def newton_options(dtype, **options) -> NewtonOptions:
+    """Validated `NewtonOptions` (raises `ValueError` naming the bad option)."""
     try:
         opts = NewtonOptions(**options)
     except TypeError as exc:
@@ -205,12 +202,19 @@ def solve_newton(mesh, P, L, eta, *, start=None, **options) -> Solution:
         raise ValueError(f"constraint must be one of {tuple(CONSTRAINTS)}, got {opts.constraint!r}")
     if opts.inner_steps < 1 or opts.max_patches < 1 or opts.n_starts < 1:
         raise ValueError("inner_steps, max_patches and n_starts must be >= 1")
-    if (opts.solver in ("dogleg", "levenberg_marquardt") and mesh.dtype == jnp.float32
+    if (opts.solver in ("dogleg", "levenberg_marquardt") and jnp.dtype(dtype) == jnp.float32
             and jax.config.jax_enable_x64):
         # optimistix 0.1.0's trust-region state is created in the default float dtype, so
         # with x64 on it mixes float64 into a float32 solve and lineax rejects it.
         raise ValueError(f"solver={opts.solver!r} needs float64 or jax_enable_x64 off in float32")
-    face, ab0, found = start if start is not None else start_points(mesh, P, L)
+    return opts
+
+
+def solve_newton(mesh, P, L, eta, start, opts: NewtonOptions) -> Solution:
+    """`solve(..., method="newton")` on validated input: see the module docstring."""
+    from ._solve import bucketed
+
+    face, ab0, found = start
     tol = opts.tol if opts.tol is not None else default_tol(mesh.dtype)
     static = opts._replace(tol=None, max_patches=0)  # traced: one compile for any value
     return _newton_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
