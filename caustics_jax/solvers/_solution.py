@@ -20,6 +20,7 @@ class Status(enum.IntEnum):
     DEGENERATE = 6
     LOST_CURVE = 7
     NOT_CONVERGED = 8
+    NO_SOLUTION = 9
 
     @property
     def message(self) -> str:
@@ -43,6 +44,7 @@ _MESSAGES = {
         "degenerate input: singular conic at the start point, or P/L on the surface"),
     Status.LOST_CURVE: "the curve has no exit from the current triangle (tangency or rounding)",
     Status.NOT_CONVERGED: "the iteration stopped (bracket or step too small) above tolerance",
+    Status.NO_SOLUTION: "the exhaustive reference found no refraction point on the whole mesh",
 }
 
 

@@ -169,8 +169,11 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
     """
     P, L, eta = _validate(mesh, P, L, eta, method)
     if method == "exhaustive":
-        from .exhaustive import solve_exhaustive
+        from .exhaustive import OPTIONS, solve_exhaustive
 
+        unknown = sorted(set(options) - set(OPTIONS))
+        if unknown:
+            raise ValueError(f"unknown exhaustive option(s) {unknown}; known: {OPTIONS}")
         return solve_exhaustive(mesh, P, L, eta, start=start, **options)
     opts = _walk_options(**options) if method == "walk" else newton_options(mesh.dtype, **options)
     n = P.shape[0]

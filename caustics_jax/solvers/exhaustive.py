@@ -11,7 +11,11 @@ For each lane (P, L) and each face:
    which covers exactly that arc); an ellipse inside the face is sampled over the whole
    pencil `(0, pi)` through a point of it.
 3. Every interval where `f` changes sign in both orientations (a root, not an
-   orientation flip; `walk._root_between`) is refined by bisection in `phi`.
+   orientation flip; `walk._root_between`) is refined by bisection in `phi`. An interval
+   from a transmitting sample to a totally reflecting one is first cut at the onset of
+   total internal reflection (bisection on the status), and a sign change between the
+   sample and the onset is refined the same way: near-critical roots have no sample on
+   their far side.
 4. Roots are deduplicated per lane (each arc is seen from both ends, and roots on shared
    edges from both faces).
 
@@ -32,6 +36,7 @@ import numpy as np
 
 from ..barycentric import barycentric_point
 from ..conic import conic_coefficients, conic_value, solve_quadratic
+from ..objectives import ObjectiveStatus, path_vectors, refracted_direction
 from ..start_points import start_points
 from ._solution import Solution, Status
 from .walk import (
@@ -44,6 +49,7 @@ from .walk import (
     _root_between,
 )
 
+OPTIONS = ("samples", "iters", "tol", "chunk", "dedupe", "return_all")
 ROOTS_PER_ARC = 2
 N_ARCS = 7  # up to 6 edge roots as arc starts, plus one ellipse inside the face
 
@@ -91,62 +97,73 @@ def _cull(mesh, P, L):
     return jax.vmap(lane)(P, L)
 
 
-def _refine(coef, V, N, P, L, eta, anchor, tau, perp, lo, hi, f_lo, iters):
+def _refine(point, V, N, P, L, eta, lo, hi, f_lo, iters):
+    """Bisection in the arc parameter `u` of a bracket `[lo, hi]` (a sign change of `f`)."""
     def body(_, c):
         lo, hi, f_lo = c
         mid = (lo + hi) / 2
-        p, _ = _pencil_point(coef, anchor, tau, perp, mid)
-        fm = _f(V, N, P, L, p[None], eta)[0][0]
+        fm = _f(V, N, P, L, point(mid)[None], eta)[0][0]
         left = jnp.sign(fm) * jnp.sign(f_lo) < 0
         return jnp.where(left, lo, mid), jnp.where(left, mid, hi), jnp.where(left, f_lo, fm)
 
     lo, hi, _ = jax.lax.fori_loop(0, iters, body, (lo, hi, f_lo))
-    return _pencil_point(coef, anchor, tau, perp, (lo + hi) / 2)[0]
+    return point((lo + hi) / 2)
 
 
 def _scan_face(mesh, P, L, face, eta, samples, iters):
-    """Roots on every arc of one face: `(N_ARCS * ROOTS_PER_ARC, 2)` ab and validity."""
+    """Roots on every arc of one face: `(N_ARCS * ROOTS_PER_ARC, 2)` ab and validity.
+
+    Each arc is parametrised by `u` in `[0, 1]`: the pencil angle `phi = u phi_end` through
+    its start for a curved conic, and the straight segment to the next crossing when the
+    conic is a line (constant normals: `A = B = C = 0`, where every other line through a
+    curve point meets it only there, so the pencil cannot parametrise it).
+    """
     V, N = mesh.triangle(face)
     coef = conic_coefficients(V, N, P, L)
+    A, B, C, D, E, F = coef
+    scale = jnp.max(jnp.abs(coef))
+    straight = jnp.max(jnp.abs(coef[:3])) <= 64 * jnp.finfo(coef.dtype).eps * scale
     roots = _edge_roots(coef)
     t_all, valid_all, ab_all = roots
-    starts, taus, perps, phi_ends, ok_arcs = [], [], [], [], []
+    starts, ends, taus, perps, phi_ends, ok_arcs = [], [], [], [], [], []
     for k in range(3):
         for j in range(2):
             x = ab_all[k, j]
-            t = jnp.stack([-(coef[2] / 2 * x[0] + coef[1] * x[1] + coef[4] / 2),
-                           coef[0] * x[0] + coef[2] / 2 * x[1] + coef[3] / 2])
+            t = jnp.stack([-(C / 2 * x[0] + B * x[1] + E / 2), A * x[0] + C / 2 * x[1] + D / 2])
             inward = jnp.asarray(_INWARD[k], t.dtype)
             side = t @ inward
             tau, perp = _orientation(coef, x, jnp.where(side < 0, -t, t))
-            ok, _, _, _, phi = _next_crossing(roots, x, tau, perp, k, t_all[k, j])
+            ok, _, _, end, phi = _next_crossing(roots, x, tau, perp, k, t_all[k, j])
             starts.append(x)
+            ends.append(end)
             taus.append(tau)
             perps.append(perp)
             phi_ends.append(jnp.where(ok, phi, 0))
             ok_arcs.append(valid_all[k, j] & ok & (side != 0))
     # Ellipse inside the face (no edge root): anchor where the line b = 1/3 meets it.
-    A, B, C, D, E, F = coef
     s, s_ok = solve_quadratic(A, C / 3 + D, B / 9 + E / 3 + F)
     anchor = jnp.stack([s[0], jnp.asarray(1 / 3, s.dtype)])
     t = jnp.stack([-(C / 2 * anchor[0] + B * anchor[1] + E / 2), A * anchor[0] + C / 2 * anchor[1] + D / 2])
     tau, perp = _orientation(coef, anchor, t)
     starts.append(anchor)
+    ends.append(anchor)
     taus.append(tau)
     perps.append(perp)
     phi_ends.append(jnp.asarray(jnp.pi, s.dtype) * (1 - 1e-9))
-    ok_arcs.append(~jnp.any(valid_all) & s_ok[0])
+    ok_arcs.append(~jnp.any(valid_all) & s_ok[0] & ~straight)
 
-    starts, taus, perps = jnp.stack(starts), jnp.stack(taus), jnp.stack(perps)
+    starts, ends, taus, perps = jnp.stack(starts), jnp.stack(ends), jnp.stack(taus), jnp.stack(perps)
     phi_ends, ok_arcs = jnp.stack(phi_ends), jnp.stack(ok_arcs)
-    frac = jnp.linspace(0, 1, samples + 1)[1:].astype(coef.dtype)
-    phis = phi_ends[:, None] * frac[None]  # (arcs, samples)
-    phis = phis.at[:, 0].set(phi_ends * 1e-9)  # just off the arc start
 
-    def arc_points(x, tau, perp, ph):
-        return jax.vmap(lambda p: _pencil_point(coef, x, tau, perp, p))(ph)
+    def point(arc, u):
+        curved, curved_ok = _pencil_point(coef, starts[arc], taus[arc], perps[arc], u * phi_ends[arc])
+        line = starts[arc] + u * (ends[arc] - starts[arc])
+        return jnp.where(straight, line, curved), straight | curved_ok
 
-    pts, pts_ok = jax.vmap(arc_points)(starts, taus, perps, phis)  # (arcs, samples, 2)
+    u = jnp.linspace(0, 1, samples + 1)[1:].astype(coef.dtype)
+    u = u.at[0].set(1e-9)  # just off the arc start
+    arcs = jnp.arange(N_ARCS)
+    pts, pts_ok = jax.vmap(lambda a: jax.vmap(lambda x: point(a, x))(u))(arcs)  # (arcs, samples, 2)
     f, st, g = _f(V, N, P, L, pts.reshape(-1, 2), eta)
     f, st, g = (x.reshape(N_ARCS, samples) for x in (f, st, g))
     good = pts_ok & (st == 0)
@@ -156,12 +173,41 @@ def _scan_face(mesh, P, L, face, eta, samples, iters):
     has = jnp.take_along_axis(change, order, axis=1) & ok_arcs[:, None]
 
     def refine(arc, i):
-        return _refine(coef, V, N, P, L, eta, starts[arc], taus[arc], perps[arc],
-                       phis[arc, i], phis[arc, i + 1], f[arc, i], iters)
+        return _refine(lambda x: point(arc, x)[0], V, N, P, L, eta, u[i], u[i + 1], f[arc, i], iters)
 
-    arcs = jnp.repeat(jnp.arange(N_ARCS), ROOTS_PER_ARC)
-    ab = jax.vmap(refine)(arcs, order.reshape(-1))
-    return ab, has.reshape(-1)
+    arc_ids = jnp.repeat(arcs, ROOTS_PER_ARC)
+    ab = jax.vmap(refine)(arc_ids, order.reshape(-1))
+
+    # A root between the last transmitting sample and the onset of total internal
+    # reflection has no sample on its far side: find the onset (bisection on the TIR
+    # status), then look for a sign change between the sample and the onset.
+    tir = pts_ok & (st == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
+    onset = (good[:, :-1] & tir[:, 1:]) | (tir[:, :-1] & good[:, 1:])
+    order_t = jnp.argsort(~onset, axis=1, stable=True)[:, :ROOTS_PER_ARC]
+    has_t = jnp.take_along_axis(onset, order_t, axis=1) & ok_arcs[:, None]
+
+    def near_onset(arc, i):
+        lo_ok = good[arc, i]
+        u_ok, u_tir = jnp.where(lo_ok, u[i], u[i + 1]), jnp.where(lo_ok, u[i + 1], u[i])
+        f_ok = jnp.where(lo_ok, f[arc, i], f[arc, i + 1])
+        g_ok = jnp.where(lo_ok, g[arc, i], g[arc, i + 1])
+
+        def body(_, c):
+            a, b = c  # a transmits, b reflects totally
+            m = (a + b) / 2
+            stm = _f(V, N, P, L, point(arc, m)[0][None], eta)[1][0]
+            is_tir = stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+            return jnp.where(is_tir, a, m), jnp.where(is_tir, m, b)
+
+        u_b, _ = jax.lax.fori_loop(0, iters, body, (u_ok, u_tir))
+        f_b, st_b, g_b = (x[0] for x in _f(V, N, P, L, point(arc, u_b)[0][None], eta))
+        bracket = _root_between((f_ok, g_ok), (f_b, g_b)) & (st_b == 0)
+        root = _refine(lambda x: point(arc, x)[0], V, N, P, L, eta, u_ok, u_b, f_ok, iters)
+        return root, bracket
+
+    ab_t, bracket_t = jax.vmap(near_onset)(arc_ids, order_t.reshape(-1))
+    return (jnp.concatenate([ab, ab_t]),
+            jnp.concatenate([has.reshape(-1), has_t.reshape(-1) & bracket_t]))
 
 
 @functools.partial(jax.jit, static_argnames=("samples", "iters"))
@@ -169,8 +215,13 @@ def _scan_pairs(mesh, P, L, faces, eta, samples, iters):
     ab, ok = jax.vmap(lambda p, l, f: _scan_face(mesh, p, l, f, eta, samples, iters))(P, L, faces)
     V, N = mesh.triangle(faces)
     fa, st, _ = jax.vmap(lambda v, n, p, l, a: _f(v, n, p, l, a, eta))(V, N, P, L, ab)
+    # f is a sine: it also vanishes where the refracted ray points straight away from L
+    # (an angle error of pi). Only a forward ray is a solution.
+    _, _, _, w_L, _ = path_vectors(V[:, None], N[:, None], P[:, None], L[:, None], ab)
+    r = refracted_direction(V[:, None], N[:, None], P[:, None], L[:, None], ab, eta)
+    forward = jnp.sum(r * w_L, axis=-1) > 0
     M = barycentric_point(V[:, None], ab)
-    return M, ab, ok, fa, st
+    return M, ab, ok & forward, fa, st
 
 
 def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: int = 60,
@@ -178,8 +229,11 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
                      return_all: bool = False):
     """`solve(..., method="exhaustive")`: all solutions (float64); see the module docstring.
 
-    Returns a `Solution` (the solution nearest `M0`), or with `return_all=True` an
-    `ExhaustiveSolution` that also holds every solution per lane.
+    Returns a `Solution` (the solution nearest `M0`, or nearest the line `PL` where the
+    segment misses the surface), or with `return_all=True` an `ExhaustiveSolution` that
+    also holds every solution per lane. Status: `FOUND` where a solution exists (even
+    without a start point: the scan does not need one), else `NO_SOLUTION`, or
+    `NO_CROSSING` where there is neither a solution nor a start point.
     """
     if mesh.dtype != jnp.float64:
         raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
@@ -243,15 +297,22 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     V0, _ = mesh.triangle(face0)
     M0 = np.asarray(barycentric_point(V0, ab0))
     found0 = np.asarray(found0)
+    # The solution nearest M0; without M0 (segment P -> L misses the surface, yet a path
+    # may exist), the one nearest the line PL.
+    Pn, Ln = np.asarray(P, np.float64), np.asarray(L, np.float64)
+    u = (Ln - Pn) / np.linalg.norm(Ln - Pn, axis=-1, keepdims=True)
+    rel = all_points - Pn[:, None]
+    to_line = np.linalg.norm(rel - np.sum(rel * u[:, None], -1, keepdims=True) * u[:, None], axis=-1)
+    to_m0 = np.linalg.norm(all_points - M0[:, None], axis=-1)
     dist = np.where(np.arange(width)[None] < count[:, None],
-                    np.linalg.norm(all_points - M0[:, None], axis=-1), np.inf)
+                    np.where(found0[:, None], to_m0, to_line), np.inf)
     best = np.argmin(dist, axis=1)
     has = count > 0
     point = all_points[np.arange(n), best]
     tri = np.where(has, all_tris[np.arange(n), best], -1)
     ab = all_ab[np.arange(n), best]
     resid = np.asarray(_f_points(mesh, jnp.asarray(np.maximum(tri, 0)), jnp.asarray(ab), P, L, eta))
-    status = np.where(~found0, Status.NO_CROSSING, np.where(has, Status.FOUND, Status.NOT_CONVERGED))
+    status = np.where(has, Status.FOUND, np.where(found0, Status.NO_SOLUTION, Status.NO_CROSSING))
     sol = Solution(
         point=jnp.asarray(np.where(has[:, None], point, 0)),
         triangle=jnp.asarray(tri.astype(np.int32)),
