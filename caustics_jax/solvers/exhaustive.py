@@ -110,14 +110,34 @@ def _refine(point, V, N, P, L, eta, lo, hi, f_lo, iters):
     return point((lo + hi) / 2)
 
 
-def _scan_face(mesh, P, L, face, eta, samples, iters):
-    """Roots on every arc of one face: `(N_ARCS * ROOTS_PER_ARC, 2)` ab and validity.
+class _Arcs(NamedTuple):
+    """The arcs of one face's conic, each parametrised by `u` in `[0, 1]` (`point`)."""
 
-    Each arc is parametrised by `u` in `[0, 1]`: the pencil angle `phi = u phi_end` through
-    its start for a curved conic, and the straight segment to the next crossing when the
-    conic is a line (constant normals: `A = B = C = 0`, where every other line through a
-    curve point meets it only there, so the pencil cannot parametrise it).
-    """
+    V: jax.Array
+    N: jax.Array
+    coef: jax.Array
+    straight: jax.Array
+    starts: jax.Array
+    ends: jax.Array
+    taus: jax.Array
+    perps: jax.Array
+    phi_ends: jax.Array
+    ok: jax.Array
+
+    def point(self, arc, u):
+        """The pencil angle `phi = u phi_end` through the arc's start for a curved conic; the
+        straight segment to the next crossing when the conic is a line (constant normals:
+        `A = B = C = 0`, where every other line through a curve point meets it only there,
+        so the pencil cannot parametrise it)."""
+        curved, curved_ok = _pencil_point(self.coef, self.starts[arc], self.taus[arc],
+                                          self.perps[arc], u * self.phi_ends[arc])
+        line = self.starts[arc] + u * (self.ends[arc] - self.starts[arc])
+        return jnp.where(self.straight, line, curved), self.straight | curved_ok
+
+
+def _arcs(mesh, P, L, face) -> _Arcs:
+    """Every arc inside the face: from each edge root to the next crossing along the curve,
+    plus an ellipse inside the face (no edge root)."""
     V, N = mesh.triangle(face)
     coef = conic_coefficients(V, N, P, L)
     A, B, C, D, E, F = coef
@@ -151,77 +171,91 @@ def _scan_face(mesh, P, L, face, eta, samples, iters):
     perps.append(perp)
     phi_ends.append(jnp.asarray(jnp.pi, s.dtype) * (1 - 1e-9))
     ok_arcs.append(~jnp.any(valid_all) & s_ok[0] & ~straight)
+    return _Arcs(V, N, coef, straight, jnp.stack(starts), jnp.stack(ends), jnp.stack(taus),
+                 jnp.stack(perps), jnp.stack(phi_ends), jnp.stack(ok_arcs))
 
-    starts, ends, taus, perps = jnp.stack(starts), jnp.stack(ends), jnp.stack(taus), jnp.stack(perps)
-    phi_ends, ok_arcs = jnp.stack(phi_ends), jnp.stack(ok_arcs)
 
-    def point(arc, u):
-        curved, curved_ok = _pencil_point(coef, starts[arc], taus[arc], perps[arc], u * phi_ends[arc])
-        line = starts[arc] + u * (ends[arc] - starts[arc])
-        return jnp.where(straight, line, curved), straight | curved_ok
+def _sample_u(samples, dtype):
+    u = jnp.linspace(0, 1, samples + 1)[1:].astype(dtype)
+    return u.at[0].set(1e-9)  # just off the arc start
 
-    u = jnp.linspace(0, 1, samples + 1)[1:].astype(coef.dtype)
-    u = u.at[0].set(1e-9)  # just off the arc start
-    arcs = jnp.arange(N_ARCS)
-    pts, pts_ok = jax.vmap(lambda a: jax.vmap(lambda x: point(a, x))(u))(arcs)  # (arcs, samples, 2)
-    f, st, g = _f(V, N, P, L, pts.reshape(-1, 2), eta)
+
+def _brackets(mesh, P, L, face, eta, samples):
+    """Phase 1 for one (lane, face): sample every arc; up to ROOTS_PER_ARC sign changes of
+    `f` per arc (kind 0) and ROOTS_PER_ARC transmit/TIR transitions (kind 1), as
+    `(valid, arc, sample index)`, each `(2 N_ARCS ROOTS_PER_ARC,)`."""
+    arcs = _arcs(mesh, P, L, face)
+    u = _sample_u(samples, arcs.coef.dtype)
+    ids = jnp.arange(N_ARCS)
+    pts, pts_ok = jax.vmap(lambda a: jax.vmap(lambda x: arcs.point(a, x))(u))(ids)
+    f, st, g = _f(arcs.V, arcs.N, P, L, pts.reshape(-1, 2), eta)
     f, st, g = (x.reshape(N_ARCS, samples) for x in (f, st, g))
-    good = pts_ok & (st == 0)
-    change = _root_between((f[:, :-1], g[:, :-1]), (f[:, 1:], g[:, 1:])) & good[:, :-1] & good[:, 1:]
-    # the first ROOTS_PER_ARC sign changes of each arc
-    order = jnp.argsort(~change, axis=1, stable=True)[:, :ROOTS_PER_ARC]
-    has = jnp.take_along_axis(change, order, axis=1) & ok_arcs[:, None]
-
-    def refine(arc, i):
-        return _refine(lambda x: point(arc, x)[0], V, N, P, L, eta, u[i], u[i + 1], f[arc, i], iters)
-
-    arc_ids = jnp.repeat(arcs, ROOTS_PER_ARC)
-    ab = jax.vmap(refine)(arc_ids, order.reshape(-1))
-
-    # A root between the last transmitting sample and the onset of total internal
-    # reflection has no sample on its far side: find the onset (bisection on the TIR
-    # status), then look for a sign change between the sample and the onset.
+    good = pts_ok & (st == ObjectiveStatus.OK)
     tir = pts_ok & (st == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
+    change = _root_between((f[:, :-1], g[:, :-1]), (f[:, 1:], g[:, 1:])) & good[:, :-1] & good[:, 1:]
     onset = (good[:, :-1] & tir[:, 1:]) | (tir[:, :-1] & good[:, 1:])
-    order_t = jnp.argsort(~onset, axis=1, stable=True)[:, :ROOTS_PER_ARC]
-    has_t = jnp.take_along_axis(onset, order_t, axis=1) & ok_arcs[:, None]
+    out = []
+    for mask in (change, onset):
+        order = jnp.argsort(~mask, axis=1, stable=True)[:, :ROOTS_PER_ARC]
+        has = jnp.take_along_axis(mask, order, axis=1) & arcs.ok[:, None]
+        out.append((has.reshape(-1), jnp.repeat(ids, ROOTS_PER_ARC), order.reshape(-1)))
+    return tuple(jnp.concatenate([a, b]) for a, b in zip(*out, strict=True))
 
-    def near_onset(arc, i):
-        lo_ok = good[arc, i]
-        u_ok, u_tir = jnp.where(lo_ok, u[i], u[i + 1]), jnp.where(lo_ok, u[i + 1], u[i])
-        f_ok = jnp.where(lo_ok, f[arc, i], f[arc, i + 1])
-        g_ok = jnp.where(lo_ok, g[arc, i], g[arc, i + 1])
 
-        def body(_, c):
-            a, b = c  # a transmits, b reflects totally
-            m = (a + b) / 2
-            stm = _f(V, N, P, L, point(arc, m)[0][None], eta)[1][0]
-            is_tir = stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
-            return jnp.where(is_tir, a, m), jnp.where(is_tir, m, b)
+def _refine_slot(mesh, P, L, face, eta, arc, i, kind, samples, iters):
+    """Phase 2 for one bracket: the root on `[u_i, u_{i+1}]` of arc `arc`.
 
-        u_b, _ = jax.lax.fori_loop(0, iters, body, (u_ok, u_tir))
-        f_b, st_b, g_b = (x[0] for x in _f(V, N, P, L, point(arc, u_b)[0][None], eta))
-        bracket = _root_between((f_ok, g_ok), (f_b, g_b)) & (st_b == 0)
-        root = _refine(lambda x: point(arc, x)[0], V, N, P, L, eta, u_ok, u_b, f_ok, iters)
-        return root, bracket
+    Kind 1 (one end totally reflecting): a root between the last transmitting sample and
+    the onset of total internal reflection has no sample on its far side, so find the
+    onset first (bisection on the status), then look for a sign change up to it.
+    """
+    arcs = _arcs(mesh, P, L, face)
+    u = _sample_u(samples, arcs.coef.dtype)
+    u_lo, u_hi = u[i], u[i + 1]
+    f2, st2, g2 = _f(arcs.V, arcs.N, P, L, jnp.stack([arcs.point(arc, u_lo)[0],
+                                                      arcs.point(arc, u_hi)[0]]), eta)
+    lo_ok = st2[0] == ObjectiveStatus.OK
+    u_ok, u_far = jnp.where(lo_ok, u_lo, u_hi), jnp.where(lo_ok, u_hi, u_lo)
+    f_ok, g_ok = jnp.where(lo_ok, f2[0], f2[1]), jnp.where(lo_ok, g2[0], g2[1])
 
-    ab_t, bracket_t = jax.vmap(near_onset)(arc_ids, order_t.reshape(-1))
-    return (jnp.concatenate([ab, ab_t]),
-            jnp.concatenate([has.reshape(-1), has_t.reshape(-1) & bracket_t]))
+    def body(_, c):
+        a, b = c  # a transmits, b reflects totally
+        m = (a + b) / 2
+        stm = _f(arcs.V, arcs.N, P, L, arcs.point(arc, m)[0][None], eta)[1][0]
+        is_tir = stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+        return jnp.where(is_tir, a, m), jnp.where(is_tir, m, b)
+
+    onset = kind == 1
+    u_b, _ = jax.lax.fori_loop(0, jnp.where(onset, iters, 0), body, (u_ok, u_far))
+    f_b, st_b, g_b = (x[0] for x in _f(arcs.V, arcs.N, P, L, arcs.point(arc, u_b)[0][None], eta))
+    bracket = ~onset | (_root_between((f_ok, g_ok), (f_b, g_b)) & (st_b == ObjectiveStatus.OK))
+    ab = _refine(lambda x: arcs.point(arc, x)[0], arcs.V, arcs.N, P, L, eta, u_ok,
+                 jnp.where(onset, u_b, u_far), f_ok, iters)
+    return ab, bracket
+
+
+@functools.partial(jax.jit, static_argnames=("samples",))
+def _scan_brackets(mesh, P, L, faces, eta, samples):
+    return jax.vmap(lambda p, l, f: _brackets(mesh, p, l, f, eta, samples))(P, L, faces)
 
 
 @functools.partial(jax.jit, static_argnames=("samples", "iters"))
-def _scan_pairs(mesh, P, L, faces, eta, samples, iters):
-    ab, ok = jax.vmap(lambda p, l, f: _scan_face(mesh, p, l, f, eta, samples, iters))(P, L, faces)
+def _refine_brackets(mesh, P, L, faces, arc, i, kind, eta, samples, iters):
+    ab, ok = jax.vmap(lambda p, l, f, a, j, k: _refine_slot(mesh, p, l, f, eta, a, j, k, samples, iters))(
+        P, L, faces, arc, i, kind)
     V, N = mesh.triangle(faces)
-    fa, st, _ = jax.vmap(lambda v, n, p, l, a: _f(v, n, p, l, a, eta))(V, N, P, L, ab)
+    fa, st, _ = jax.vmap(lambda v, n, p, l, x: _f(v, n, p, l, x[None], eta))(V, N, P, L, ab)
     # f is a sine: it also vanishes where the refracted ray points straight away from L
     # (an angle error of pi). Only a forward ray is a solution.
-    _, _, _, w_L, _ = path_vectors(V[:, None], N[:, None], P[:, None], L[:, None], ab)
-    r = refracted_direction(V[:, None], N[:, None], P[:, None], L[:, None], ab, eta)
+    _, _, _, w_L, _ = path_vectors(V, N, P, L, ab)
+    r = refracted_direction(V, N, P, L, ab, eta)
     forward = jnp.sum(r * w_L, axis=-1) > 0
-    M = barycentric_point(V[:, None], ab)
-    return M, ab, ok & forward, fa, st
+    return barycentric_point(V, ab), ab, ok & forward, fa[:, 0], st[:, 0]
+
+
+def _padded(idx, size):
+    """`idx` padded with its first entry to `size` (one compile per size class)."""
+    return np.concatenate([idx, np.full(size - len(idx), idx[0] if len(idx) else 0, idx.dtype)])
 
 
 def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: int = 60,
@@ -254,19 +288,35 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
         faces.append(fi)
     lanes = np.concatenate(lanes).astype(np.int32)
     faces = np.concatenate(faces).astype(np.int32)
-    pts, tris, res, abs_ = [], [], [], []
+    # Phase 1: brackets of every (lane, face) pair; phase 2: refine only the brackets.
+    slot_pair, slot_arc, slot_i, slot_kind = [], [], [], []
     for i in range(0, len(lanes), chunk):
         li, fi = lanes[i:i + chunk], faces[i:i + chunk]
-        pad = _bucket(len(li), 64) - len(li)
-        lp = np.concatenate([li, np.full(pad, li[0] if len(li) else 0, np.int32)])
-        fp = np.concatenate([fi, np.full(pad, fi[0] if len(fi) else 0, np.int32)])
-        M, ab, ok, fa, st = _scan_pairs(mesh_b, P[lp], L[lp], jnp.asarray(fp), eta, samples, iters)
-        ok = np.asarray(ok)[:len(li)] & (np.abs(np.asarray(fa))[:len(li)] <= tol) & (np.asarray(st)[:len(li)] == 0)
-        M = np.asarray(M)[:len(li)]
+        sel = _padded(np.arange(len(li)), _bucket(len(li), 64))
+        valid, arc, j = (np.asarray(x)[:len(li)] for x in _scan_brackets(
+            mesh_b, P[li[sel]], L[li[sel]], jnp.asarray(fi[sel]), eta, samples))
+        pair, slot = np.nonzero(valid)
+        slot_pair.append(pair + i)
+        slot_arc.append(arc[pair, slot])
+        slot_i.append(j[pair, slot])
+        slot_kind.append((slot >= N_ARCS * ROOTS_PER_ARC).astype(np.int32))
+    slot_pair, slot_arc, slot_i, slot_kind = (
+        np.concatenate(x).astype(np.int32) if x else np.zeros(0, np.int32)
+        for x in (slot_pair, slot_arc, slot_i, slot_kind))
+    pts, tris, res, abs_ = [], [], [], []
+    for i in range(0, len(slot_pair), chunk):
+        sl = np.arange(i, min(i + chunk, len(slot_pair)))
+        sel = _padded(sl, _bucket(len(sl), 64))
+        pair = slot_pair[sel]
+        M, ab, ok, fa, st = (np.asarray(x)[:len(sl)] for x in _refine_brackets(
+            mesh_b, P[lanes[pair]], L[lanes[pair]], jnp.asarray(faces[pair]),
+            jnp.asarray(slot_arc[sel]), jnp.asarray(slot_i[sel]), jnp.asarray(slot_kind[sel]),
+            eta, samples, iters))
+        ok = ok & (np.abs(fa) <= tol) & (st == 0)
         pts.append(M[ok])
-        abs_.append(np.asarray(ab)[:len(li)][ok])
-        tris.append(np.repeat(fi[:, None], ok.shape[1], 1)[ok])
-        res.append(np.repeat(li[:, None], ok.shape[1], 1)[ok])
+        abs_.append(ab[ok])
+        tris.append(faces[pair[:len(sl)]][ok])
+        res.append(lanes[pair[:len(sl)]][ok])
     pts = np.concatenate(pts) if pts else np.zeros((0, 3))
     tris = np.concatenate(tris) if tris else np.zeros(0, np.int32)
     owner = np.concatenate(res) if res else np.zeros(0, np.int32)

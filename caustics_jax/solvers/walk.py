@@ -197,12 +197,12 @@ def _opposite(f1, f2):
     return jnp.sign(f1) * jnp.sign(f2) < 0
 
 
-def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse, flip):
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status.
 
-    `flip` (traced bool) walks the other way from the one chosen below; also returns
-    whether that second way exists (a walk that started without a bracket, with an exit
-    in both directions).
+    Returns `((can_turn, state), other)`: `other` walks the other way from the one chosen
+    here; `can_turn` says whether that second way exists (a walk that started without a
+    bracket, with an exit in both directions). Both share every evaluation of `f`.
     """
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
@@ -252,8 +252,6 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse, flip):
     tirp, tirm = stp == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
     cos_p, cos_m = _cos_at_P(V, N, P, L, jnp.stack([abp, abm]))
     prefer_m = jnp.where(tirp != tirm, tirp, jnp.where(tirp, cos_m > cos_p, jnp.abs(fm) < jnp.abs(fp)))
-    walk_m = okm & (~okp | prefer_m)
-    walk_m = jnp.where(flip, ~walk_m, walk_m)
 
     # The ellipse from just after M0 (near point of +t0) to just before it (near point
     # of -t0), so that no stretch of the curve is left out.
@@ -270,50 +268,54 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse, flip):
     j = jnp.argmax(change)
     ellipse_bracket = change[j]
 
-    is_ellipse = ~okp & ~okm
-    bracket = jnp.where(is_ellipse, ellipse_bracket, br_p | br_m)
-    tau = jnp.where(is_ellipse, tau_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), taum, taup))
-    perp = jnp.where(is_ellipse, perp_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), perpm, perpp))
-    phi_lo = jnp.where(is_ellipse, phis_all[j], jnp.where(use_m_bracket, phism, phisp))
-    phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m_bracket, phim, phip))
-    f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m_bracket, fsm, fsp))
-    f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m_bracket, fm, fp))
-    ab_lo = jnp.where(is_ellipse, pts[j], jnp.where(use_m_bracket, nearm, nearp))
-    ab_hi = jnp.where(is_ellipse, pts[j + 1], jnp.where(use_m_bracket, abm, abp))
+    def build(walk_m):
+        is_ellipse = ~okp & ~okm
+        bracket = jnp.where(is_ellipse, ellipse_bracket, br_p | br_m)
+        tau = jnp.where(is_ellipse, tau_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), taum, taup))
+        perp = jnp.where(is_ellipse, perp_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), perpm, perpp))
+        phi_lo = jnp.where(is_ellipse, phis_all[j], jnp.where(use_m_bracket, phism, phisp))
+        phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m_bracket, phim, phip))
+        f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m_bracket, fsm, fsp))
+        f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m_bracket, fm, fp))
+        ab_lo = jnp.where(is_ellipse, pts[j], jnp.where(use_m_bracket, nearm, nearp))
+        ab_hi = jnp.where(is_ellipse, pts[j + 1], jnp.where(use_m_bracket, abm, abp))
 
-    pick_m = walk_m
-    exit_k = jnp.where(pick_m, km, kp)
-    exit_t = jnp.where(pick_m, tm, tp)
-    exit_ab = jnp.where(pick_m, abm, abp)
-    f_exit = jnp.where(pick_m, fm, fp)
-    st_exit = jnp.where(pick_m, stm, stp)
+        pick_m = walk_m
+        exit_k = jnp.where(pick_m, km, kp)
+        exit_t = jnp.where(pick_m, tm, tp)
+        exit_ab = jnp.where(pick_m, abm, abp)
+        f_exit = jnp.where(pick_m, fm, fp)
+        st_exit = jnp.where(pick_m, stm, stp)
 
-    status = jnp.asarray(Status.FOUND, jnp.int32)
-    mode = jnp.where(bracket, BISECT, WALK)
-    # A walk may start inside total internal reflection (M0 beyond the critical angle):
-    # it walks on until f is defined again, so only a degenerate exit stops it here.
-    mode = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), DONE, mode)
-    status = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), Status.DEGENERATE, status)
-    mode = jnp.where(is_ellipse & ~ellipse_bracket, DONE, mode)
-    status = jnp.where(is_ellipse & ~ellipse_bracket, Status.UNRESOLVED_ELLIPSE, status)
-    at_m0 = (jnp.abs(f0) <= tol) & (st0 == OK)  # M0 itself is a solution
-    mode = jnp.where(at_m0, DONE, mode)
-    status = jnp.where(at_m0, Status.FOUND, status)
-    # Terminal conditions that override everything else, most specific last.
-    degenerate = singular | (st0 == ObjectiveStatus.DEGENERATE)
-    mode = jnp.where(degenerate, DONE, mode)
-    status = jnp.where(degenerate, Status.DEGENERATE, status)
-    mode = jnp.where(found, mode, DONE)
-    status = jnp.where(found, status, Status.NO_CROSSING)
+        status = jnp.asarray(Status.FOUND, jnp.int32)
+        mode = jnp.where(bracket, BISECT, WALK)
+        # A walk may start inside total internal reflection (M0 beyond the critical angle):
+        # it walks on until f is defined again, so only a degenerate exit stops it here.
+        mode = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), DONE, mode)
+        status = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), Status.DEGENERATE, status)
+        mode = jnp.where(is_ellipse & ~ellipse_bracket, DONE, mode)
+        status = jnp.where(is_ellipse & ~ellipse_bracket, Status.UNRESOLVED_ELLIPSE, status)
+        at_m0 = (jnp.abs(f0) <= tol) & (st0 == OK)  # M0 itself is a solution
+        mode = jnp.where(at_m0, DONE, mode)
+        status = jnp.where(at_m0, Status.FOUND, status)
+        # Terminal conditions that override everything else, most specific last.
+        degenerate = singular | (st0 == ObjectiveStatus.DEGENERATE)
+        mode = jnp.where(degenerate, DONE, mode)
+        status = jnp.where(degenerate, Status.DEGENERATE, status)
+        mode = jnp.where(found, mode, DONE)
+        status = jnp.where(found, status, Status.NO_CROSSING)
 
-    can_flip = (mode == WALK) & okp & okm
-    return can_flip, _State(
-        mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
-        exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
-        anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
-        ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32), best_ab=ab0,
-        best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
-    )
+        can_flip = (mode == WALK) & okp & okm
+        return can_flip, _State(
+            mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
+            exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
+            anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
+            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32), best_ab=ab0,
+            best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
+        )
+
+    walk_m = okm & (~okp | prefer_m)
+    return build(walk_m), build(~walk_m)[1]
 
 
 def _walk_geometry(mesh, coef, g, k_in, t_in, e):
@@ -468,13 +470,8 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptio
     way only; on steep waves the first choice is wrong for some lanes (the exhaustive
     reference finds a solution behind `M0`), `test_walk_turns_back_when_the_first_direction_fails`.
     """
-    flips = jnp.array([False, True])
-    can_flip, starts = jax.vmap(
-        lambda fl: _first_triangle(mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples, fl)
-    )(flips)
-    state = jax.tree.map(lambda x: x[0], starts)
-    other = jax.tree.map(lambda x: x[1], starts)
-    can_flip = can_flip[0]
+    (can_flip, state), other = _first_triangle(
+        mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples)
     illinois = options.bracket == "illinois"
 
     def body(c):
