@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 
 import equinox as eqx
 import jax
@@ -53,6 +54,22 @@ def _validate(mesh, P, L, eta, method):
 
 def _bucket(n: int, minimum: int = 256) -> int:
     return max(minimum, 1 << (max(n, 1) - 1).bit_length())
+
+
+LANE_CHUNK = int(os.environ.get("CAUSTICS_JAX_LANE_CHUNK", 256))
+
+
+def map_lanes(fn, *args, chunk: int | None = None):
+    """`vmap(fn)` over lanes, `chunk` lanes at a time (`lax.map` with `batch_size`).
+
+    A vmapped while loop runs until its slowest lane ends: over 100k lanes one lane that
+    needs 90 iterations (median 5) would hold up all of them. In chunks, each chunk stops
+    at its own slowest lane.
+    """
+    chunk = LANE_CHUNK if chunk is None else chunk
+    if args[0].shape[0] <= chunk:
+        return jax.vmap(fn)(*args)
+    return jax.lax.map(lambda a: fn(*a), args, batch_size=chunk)
 
 
 def lane_bucket(n: int) -> int:
@@ -108,8 +125,8 @@ def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps,
                 options: WalkOptions) -> Solution:
     eta = jnp.asarray(eta, mesh.dtype)
     tol = jnp.asarray(tol, mesh.dtype)
-    states = jax.vmap(
-        lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps))(
+    states = map_lanes(
+        lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps),
         P, L, face, ab0, found)
     V, N = mesh.triangle(states.face)
     from ..objectives import signed_sine

@@ -166,7 +166,9 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
     else:
         starts = ab0[:, None]
     lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, tol, max_patches, options)  # noqa: E731
-    per_start = jax.vmap(lambda a: jax.vmap(lane)(P, L, face, a, found), in_axes=1, out_axes=1)
+    from ._solve import map_lanes
+
+    per_start = jax.vmap(lambda a: map_lanes(lane, P, L, face, a, found), in_axes=1, out_axes=1)
     states, f_end = per_start(starts)  # leaves (n, S, ...)
     V, N = mesh.triangle(states.face)
     points = barycentric_point(V, states.ab)
