@@ -32,6 +32,7 @@ from .objectives import (
 )
 from .solvers import Solution, Status, solve
 from .start_points import start_points
+from .transport import autodiff_D, ray_differential_D
 
 __version__ = "0.1.0"
 
@@ -45,6 +46,7 @@ __all__ = [
     "start_points",
     "ObjectiveStatus",
     "angle_difference_residual",
+    "autodiff_D",
     "barycentric_point",
     "conic_coefficients",
     "conic_tangent",
@@ -57,6 +59,7 @@ __all__ = [
     "half_vector_residual",
     "interpolated_normal",
     "precision",
+    "ray_differential_D",
     "reflect",
     "refract",
     "safe_normalize",
