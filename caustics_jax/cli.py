@@ -128,7 +128,7 @@ def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
                    help="lanes checked against the exhaustive reference (0: none)")
     p.add_argument("--sweep-n", type=int, default=8192, help="lanes per Pareto sweep point")
     p.add_argument("--no-sweep", action="store_true", help="skip the tolerance sweep and figure")
-    p.add_argument("--repeats", type=int, default=3, help="timed calls per measurement")
+    p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement")
     p.add_argument("--eta", type=float, default=1.333)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", default="figures/solver_comparison.json" if demo else None,

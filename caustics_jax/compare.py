@@ -77,7 +77,7 @@ class CompareConfig:
     ref_n: int = 1024
     sweep_n: int = 8192
     sweep: bool = True
-    repeats: int = 3
+    repeats: int = 2
     eta: float = 1.333
     seed: int = 0
 
