@@ -186,3 +186,20 @@ def refraction_angle_error(mesh, face, ab, P, L, eta: float) -> np.ndarray:
     cos = np.clip(np.sum(_unit(np.where(tir[:, None], 1.0, r)) * w_L, -1), -1, 1)
     sin = np.linalg.norm(np.cross(np.where(tir[:, None], 1.0, r), w_L), axis=-1)
     return np.where(tir, np.pi, np.arctan2(sin, cos))
+
+
+def assert_solution_sane(sol, tol: float, slack: float) -> None:
+    """Checks every solver test shares: no NaN/Inf in any field, `found` exactly where
+    `status == FOUND` (a named code), `|residual| <= tol` where found, and the returned
+    barycentrics inside the face up to `slack`."""
+    from .solvers import Status
+
+    for name in ("point", "barycentric", "residual", "start_point", "iterations", "crossed"):
+        assert np.all(np.isfinite(np.asarray(getattr(sol, name)))), name
+    status = np.asarray(sol.status)
+    assert set(np.unique(status)) <= {s.value for s in Status}
+    found = np.asarray(sol.found)
+    np.testing.assert_array_equal(found, status == Status.FOUND)
+    assert np.all(np.abs(np.asarray(sol.residual)[found]) <= tol)
+    ab = np.asarray(sol.barycentric)[found]
+    assert np.all(ab >= -slack) and np.all(ab.sum(-1) <= 1 + slack)

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from caustics_jax import scenes, solve
-from caustics_jax.solvers import Solution, Status
+from caustics_jax.solvers import Solution
 from caustics_jax.solvers.exhaustive import ExhaustiveSolution
 from caustics_jax.start_points import start_points
+from caustics_jax.testing import assert_solution_sane as _sane
 from caustics_jax.testing import planted_mesh_paths, refraction_angle_error
 
 ETA = 1.333
@@ -52,16 +53,7 @@ def _mesh(scene):
 
 
 def assert_solution_sane(sol: Solution, tol=TOL):
-    """No NaN/Inf anywhere; found exactly where status is FOUND, with |residual| <= tol."""
-    for name in ("point", "barycentric", "residual", "start_point", "iterations", "crossed"):
-        assert np.all(np.isfinite(np.asarray(getattr(sol, name)))), name
-    status = np.asarray(sol.status)
-    assert set(np.unique(status)) <= {s.value for s in Status}
-    found = np.asarray(sol.found)
-    np.testing.assert_array_equal(found, status == Status.FOUND)
-    assert np.all(np.abs(np.asarray(sol.residual)[found]) <= tol)
-    ab = np.asarray(sol.barycentric)[found]
-    assert np.all(ab >= -PLANE_TOL) and np.all(ab.sum(-1) <= 1 + PLANE_TOL)
+    _sane(sol, tol, PLANE_TOL)
 
 
 def _barycentric(mesh, tri, M):

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from caustics_jax import scenes, solve
-from caustics_jax.solvers import Solution, Status
+from caustics_jax.solvers import Solution
 from caustics_jax.solvers.walk import default_tol
+from caustics_jax.testing import assert_solution_sane as _sane
 from caustics_jax.testing import planted_mesh_paths, refraction_angle_error
 
 DTYPES = ["float32", "float64"]
@@ -60,23 +61,8 @@ def _steep(dtype):
 
 
 def assert_solution_sane(sol: Solution, dtype):
-    """No NaN/Inf anywhere; found exactly where status is FOUND, with |residual| <= tol.
-
-    (As `test_walk.py`'s helper, which is not imported: it would tie this file to pytest's
-    default import mode.)
-    """
-    tol = default_tol(dtype)
-    for name in ("point", "barycentric", "residual", "start_point", "iterations", "crossed"):
-        assert np.all(np.isfinite(np.asarray(getattr(sol, name)))), name
-    status = np.asarray(sol.status)
-    assert set(np.unique(status)) <= {s.value for s in Status}
-    found = np.asarray(sol.found)
-    np.testing.assert_array_equal(found, status == Status.FOUND)
-    assert np.all(np.abs(np.asarray(sol.residual)[found]) <= tol)
-    ab = np.asarray(sol.barycentric)[found]
     # Newton accepts points within 64 eps of the triangle; measured slack: 0 in both dtypes.
-    slack = 1e-5 if dtype == "float32" else 1e-12
-    assert np.all(ab >= -slack) and np.all(ab.sum(-1) <= 1 + slack)
+    _sane(sol, default_tol(dtype), 1e-5 if dtype == "float32" else 1e-12)
 
 
 def _angle_error(sol, P, L, ref):
