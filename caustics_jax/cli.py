@@ -1,7 +1,9 @@
-"""`caustics-jax`: the command line (`compare`, `demo`).
+"""`caustics-jax`: the command line (`compare`, `demo`, `export`, `conformance`).
 
     caustics-jax demo                      # solver comparison on the default wavy pool
     caustics-jax compare --n 20000 --dtype float32 --configs walk newton-hv --json out.json
+    caustics-jax export --out refdata --count 1024 --seed 0    # shader reference data
+    caustics-jax conformance refdata       # run the GLSL ports on a Vulkan device against it
 """
 
 from __future__ import annotations
@@ -137,6 +139,36 @@ def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
                    help="Pareto figure path ('none' to skip)")
 
 
+def _export(args) -> int:
+    from . import export
+
+    try:
+        written = export.export(args.out, kernels=args.kernels, count=args.count, seed=args.seed)
+    except ValueError as exc:
+        print(f"caustics-jax export: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(written)} files to {args.out} (kernels: {', '.join(args.kernels or export.KERNELS)})")
+    return 0
+
+
+def _conformance(args) -> int:
+    from .shaders import conformance
+
+    argv = [args.data] + (["--kernels", *args.kernels] if args.kernels else [])
+    return conformance.main(argv + (["--json", args.json] if args.json else []))
+
+
+def _add_export_args(p: argparse.ArgumentParser) -> None:
+    from .export import KERNELS
+
+    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL",
+                   help=f"kernels to export (default: all of {', '.join(KERNELS)})")
+    p.add_argument("--count", type=int, default=256,
+                   help="random + planted records per kernel (a quarter planted); adversarial cases come on top")
+    p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="caustics-jax", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -145,7 +177,17 @@ def main(argv=None) -> int:
     _add_compare_args(sub.add_parser(
         "demo", help="the main job: compare on the default wavy pool, write the figure"),
         demo=True)
+    _add_export_args(sub.add_parser(
+        "export", help="reference data for shader tests: <kernel>.json + .bin per kernel, C header"))
+    conf = sub.add_parser("conformance", help="run the GLSL ports on a Vulkan device against exported data")
+    conf.add_argument("data", help="directory written by `caustics-jax export`")
+    conf.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL")
+    conf.add_argument("--json", default=None, help="write the per-kernel reports as JSON here")
     args = parser.parse_args(argv)
+    if args.command == "export":
+        return _export(args)
+    if args.command == "conformance":
+        return _conformance(args)
     return _compare(args)
 
 

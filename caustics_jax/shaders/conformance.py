@@ -1,0 +1,206 @@
+"""Conformance of the GLSL ports against the exported reference data, on a Vulkan device.
+
+For each kernel: assemble `#version 450` + the record struct (generated from the export's
+field list, the same one that lays out the `.bin` and the C header) + `common.glsl` +
+`<kernel>.glsl` + a `main` that runs `cj_run` once per record; compile it to SPIR-V with
+`glslangValidator`; run it with the small C host (`host.c`, built with `cc` against the
+Vulkan loader) on the records with their outputs overwritten by NaN; read the records back
+and compare the outputs with the reference (`export.compare`: max abs / rel / ULP error and
+pass rate against the manifest tolerances).
+
+    python -m caustics_jax.shaders.conformance DATA_DIR [--kernels ...] [--json out.json]
+
+Needs `glslangValidator` (Debian `glslang-tools`), a C compiler, the Vulkan headers and
+loader (`libvulkan-dev`, `libvulkan1`) and a Vulkan driver (`mesa-vulkan-drivers` gives
+lavapipe on the CPU). Where one is missing, `Unavailable` says which.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .. import export as ex
+
+SHADER_DIR = Path(__file__).resolve().parent
+LOCAL_SIZE = 64  # host.c dispatches ceil(count / 64) workgroups
+
+
+class Unavailable(RuntimeError):
+    """The toolchain or the Vulkan device needed for a conformance run is missing."""
+
+
+def glsl_struct(kernel: ex.Kernel) -> str:
+    """GLSL `struct Record` matching the std430 layout of `export.layout` (vec3 + explicit pad)."""
+    lines = ["struct Record {"]
+    for f in kernel.fields:
+        lines.append(f"    {f.glsl} {f.name}{f'[{f.length}]' if f.length else ''};")
+        if f.glsl == "vec3" and not f.length:
+            lines.append(f"    float _pad_{f.name};  // vec3 padded to 16 bytes")
+    lines.append("};")
+    return "\n".join(lines)
+
+
+def shader_source(kernel_name: str, shader_dir: Path | None = None) -> str:
+    """The complete compute shader of one kernel, ready for glslangValidator."""
+    shader_dir = Path(shader_dir or SHADER_DIR)
+    kernel = ex.KERNELS[kernel_name]
+    return "\n".join([
+        "#version 450",
+        f"// caustics_jax conformance shader for '{kernel_name}' ({kernel.equations})",
+        f"layout(local_size_x = {LOCAL_SIZE}) in;",
+        glsl_struct(kernel),
+        "layout(std430, binding = 0) readonly buffer RecordsIn { Record records_in[]; };",
+        "layout(std430, binding = 1) writeonly buffer RecordsOut { Record records_out[]; };",
+        "layout(push_constant) uniform Push { uint count; } push;",
+        "#line 1 1",
+        (shader_dir / "common.glsl").read_text(),
+        "#line 1 2",
+        (shader_dir / f"{kernel_name}.glsl").read_text(),
+        "void main() {",
+        "    uint i = gl_GlobalInvocationID.x;",
+        "    if (i >= push.count) return;",
+        "    Record r = records_in[i];",
+        "    cj_run(r);",
+        "    records_out[i] = r;",
+        "}",
+        "",
+    ])
+
+
+def _which(tool: str) -> str:
+    path = shutil.which(tool)
+    if path is None:
+        raise Unavailable(f"{tool} not found on PATH")
+    return path
+
+
+def build_host(cache_dir: Path) -> Path:
+    """Compile host.c (once per source version) into `cache_dir`; Unavailable if it cannot."""
+    src = SHADER_DIR / "host.c"
+    digest = hashlib.sha256(src.read_bytes()).hexdigest()[:12]
+    exe = Path(cache_dir) / f"cj_vk_host_{digest}"
+    if exe.exists():
+        return exe
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise Unavailable("no C compiler (cc) to build the Vulkan host")
+    Path(cache_dir).mkdir(parents=True, exist_ok=True)
+    tmp = exe.with_suffix(".tmp")
+    proc = subprocess.run([cc, "-O2", "-std=c11", "-o", str(tmp), str(src), "-lvulkan"],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        hint = " (install libvulkan-dev)" if "vulkan" in proc.stderr else ""
+        raise Unavailable(f"cannot build the Vulkan host{hint}: {proc.stderr.strip()[:400]}")
+    tmp.replace(exe)
+    return exe
+
+
+def compile_shader(source: str, out: Path) -> Path:
+    """glslangValidator -V (Vulkan 1.0 SPIR-V); raises RuntimeError with its log on errors."""
+    glslang = _which("glslangValidator")
+    comp = out.with_suffix(".comp")
+    comp.write_text(source)
+    proc = subprocess.run([glslang, "-V", "--target-env", "vulkan1.0", "-o", str(out), str(comp)],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"glslangValidator failed on {comp}:\n{proc.stdout}{proc.stderr}")
+    return out
+
+
+def _hide_outputs(manifest: dict, raw: bytes) -> bytes:
+    """The records with every output field's bytes set to 0xFF (NaN / 0xFFFFFFFF): a shader
+    that forgets to write an output cannot pass by echoing the reference."""
+    buf = np.frombuffer(raw, np.uint8).copy().reshape(manifest["count"], manifest["stride"])
+    for e in manifest["fields"]:
+        if e["role"] == "output":
+            size = 4 * int(np.prod(e["storage_shape"], dtype=np.int64))
+            buf[:, e["offset"]: e["offset"] + size] = 0xFF
+    return buf.tobytes()
+
+
+def run_kernel(data_dir, kernel_name: str, work_dir, *, source: str | None = None, host: Path | None = None) -> dict:
+    """Run one kernel's shader on the device against `data_dir/<kernel>.{json,bin}`.
+
+    `source` replaces the assembled shader (to test a modified port). Returns
+    `export.compare`'s report plus `device`. Raises Unavailable without a toolchain/device.
+    """
+    work = Path(work_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    host = host or build_host(work)
+    manifest, records = ex.load(data_dir, kernel_name)
+    spv = compile_shader(source if source is not None else shader_source(kernel_name), work / f"{kernel_name}.spv")
+    raw = (Path(data_dir) / f"{kernel_name}.bin").read_bytes()
+    (work / f"{kernel_name}.in.bin").write_bytes(_hide_outputs(manifest, raw))
+    out = work / f"{kernel_name}.out.bin"
+    proc = subprocess.run([str(host), str(spv), str(work / f"{kernel_name}.in.bin"), str(out),
+                           str(manifest["count"]), str(manifest["stride"])], capture_output=True, text=True)
+    if proc.returncode == 3:
+        raise Unavailable(f"no Vulkan device: {proc.stderr.strip()}")
+    if proc.returncode != 0:
+        raise RuntimeError(f"Vulkan host failed ({proc.returncode}): {proc.stderr.strip()}")
+    got = ex.read_records(manifest, out.read_bytes())
+    report = ex.compare(manifest, records, got)
+    report["device"] = proc.stdout.strip()
+    return report
+
+
+def run_conformance(data_dir, kernels=None, work_dir=None) -> list[dict]:
+    """`run_kernel` for every kernel exported in `data_dir` (or `kernels`)."""
+    names = kernels or [k for k in ex.KERNELS if (Path(data_dir) / f"{k}.json").exists()]
+    if not names:
+        raise ValueError(f"no exported kernels in {data_dir}")
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(work_dir or tmp)
+        host = build_host(work)
+        return [run_kernel(data_dir, k, work, host=host) for k in names]
+
+
+def format_table(reports: list[dict]) -> str:
+    """Markdown table: per kernel and float output, max abs / rel / ULP error and pass rate."""
+    rows = ["| kernel | output | records | max abs | max rel | max ULP | pass rate |", "|---|---|---|---|---|---|---|"]
+    for r in reports:
+        for name, f in r["fields"].items():
+            if "max_abs" in f:
+                rows.append(f"| {r['kernel']} | {name} | {r['count']} | {f['max_abs']:.2e} | {f['max_rel']:.2e} | "
+                            f"{f['max_ulp']} | {f['pass_rate']:.4f} |")
+            else:
+                rows.append(f"| {r['kernel']} | {name} (exact) | {r['count']} | - | - | - | {f['pass_rate']:.4f} |")
+    return "\n".join(rows)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m caustics_jax.shaders.conformance", description=__doc__.splitlines()[0])
+    p.add_argument("data", help="directory written by `caustics-jax export`")
+    p.add_argument("--kernels", nargs="+", default=None, choices=sorted(ex.KERNELS))
+    p.add_argument("--json", default=None, help="write the reports as JSON here")
+    args = p.parse_args(argv)
+    try:
+        reports = run_conformance(args.data, args.kernels)
+    except Unavailable as exc:
+        print(f"conformance: skipped, {exc}", file=sys.stderr)
+        return 3
+    except ValueError as exc:
+        print(f"conformance: {exc}", file=sys.stderr)
+        return 2
+    print(f"device: {reports[0]['device']}")
+    print(format_table(reports))
+    if args.json:
+        Path(args.json).write_text(json.dumps(reports, indent=1) + "\n")
+    failed = [r["kernel"] for r in reports if r["pass_rate"] < 1]
+    if failed:
+        print(f"FAILED: {failed}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,289 @@
+/* Minimal Vulkan compute host for the conformance harness (caustics_jax/conformance.py).
+ *
+ *   cj_vk_host SHADER.spv IN.bin OUT.bin COUNT STRIDE
+ *
+ * Runs the compute shader once over COUNT records: binding 0 is a storage buffer holding
+ * IN.bin (the exported std430 records), binding 1 a storage buffer of COUNT * STRIDE
+ * bytes the shader writes its records into, push constant 0 the record count. Writes
+ * binding 1 to OUT.bin and the device name to stdout. Exit status 3 means "no Vulkan
+ * device" (the harness skips), any other non-zero status an error.
+ *
+ * Host-visible, host-coherent memory only: on lavapipe all memory is, and for a test
+ * harness the staging copy of a discrete GPU is not worth its code.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <vulkan/vulkan.h>
+
+#define LOCAL_SIZE 64u
+
+static int fail(const char *what, VkResult r) {
+    fprintf(stderr, "cj_vk_host: %s failed (VkResult %d)\n", what, (int)r);
+    return 1;
+}
+
+#define CHECK(call, what)                   \
+    do {                                    \
+        VkResult r_ = (call);               \
+        if (r_ != VK_SUCCESS) return fail(what, r_); \
+    } while (0)
+
+static void *read_file(const char *path, size_t *size) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    void *buf = malloc(n > 0 ? (size_t)n : 1);
+    if (buf && n > 0 && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+        free(buf);
+        buf = NULL;
+    }
+    fclose(f);
+    *size = (size_t)n;
+    return buf;
+}
+
+static int find_memory(VkPhysicalDevice phys, uint32_t type_bits, uint32_t *index) {
+    VkPhysicalDeviceMemoryProperties props;
+    vkGetPhysicalDeviceMemoryProperties(phys, &props);
+    VkMemoryPropertyFlags want = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    for (uint32_t i = 0; i < props.memoryTypeCount; ++i) {
+        if ((type_bits & (1u << i)) && (props.memoryTypes[i].propertyFlags & want) == want) {
+            *index = i;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+static int make_buffer(VkPhysicalDevice phys, VkDevice dev, VkDeviceSize size, VkBuffer *buf, VkDeviceMemory *mem) {
+    VkBufferCreateInfo bi = {VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+    bi.size = size;
+    bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+    bi.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    CHECK(vkCreateBuffer(dev, &bi, NULL, buf), "vkCreateBuffer");
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(dev, *buf, &req);
+    VkMemoryAllocateInfo ai = {VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    ai.allocationSize = req.size;
+    if (!find_memory(phys, req.memoryTypeBits, &ai.memoryTypeIndex)) {
+        fprintf(stderr, "cj_vk_host: no host-visible coherent memory type\n");
+        return 1;
+    }
+    CHECK(vkAllocateMemory(dev, &ai, NULL, mem), "vkAllocateMemory");
+    CHECK(vkBindBufferMemory(dev, *buf, *mem, 0), "vkBindBufferMemory");
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    if (argc != 6) {
+        fprintf(stderr, "usage: %s SHADER.spv IN.bin OUT.bin COUNT STRIDE\n", argv[0]);
+        return 2;
+    }
+    uint32_t count = (uint32_t)strtoul(argv[4], NULL, 10);
+    VkDeviceSize stride = (VkDeviceSize)strtoull(argv[5], NULL, 10);
+    size_t spv_size = 0, in_size = 0;
+    uint32_t *spv = read_file(argv[1], &spv_size);
+    void *in = read_file(argv[2], &in_size);
+    if (!spv || !in || spv_size % 4 != 0) {
+        fprintf(stderr, "cj_vk_host: cannot read %s or %s\n", argv[1], argv[2]);
+        return 2;
+    }
+    VkDeviceSize out_size = (VkDeviceSize)count * stride;
+    if (count == 0 || stride == 0 || in_size != out_size) {
+        fprintf(stderr, "cj_vk_host: %s holds %zu bytes, expected COUNT * STRIDE = %llu\n", argv[2], in_size,
+                (unsigned long long)out_size);
+        return 2;
+    }
+
+    VkApplicationInfo app = {VK_STRUCTURE_TYPE_APPLICATION_INFO};
+    app.pApplicationName = "caustics_jax conformance";
+    app.apiVersion = VK_API_VERSION_1_0;
+    VkInstanceCreateInfo ici = {VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+    ici.pApplicationInfo = &app;
+    VkInstance inst;
+    if (vkCreateInstance(&ici, NULL, &inst) != VK_SUCCESS) {
+        fprintf(stderr, "cj_vk_host: no Vulkan instance (no loader or no driver)\n");
+        return 3;
+    }
+    uint32_t n_phys = 0;
+    vkEnumeratePhysicalDevices(inst, &n_phys, NULL);
+    if (n_phys == 0) {
+        fprintf(stderr, "cj_vk_host: no Vulkan physical device\n");
+        return 3;
+    }
+    VkPhysicalDevice physs[16];
+    if (n_phys > 16) n_phys = 16;
+    vkEnumeratePhysicalDevices(inst, &n_phys, physs);
+
+    /* First device with a compute queue; CJ_VK_DEVICE=<index> picks another. */
+    const char *want = getenv("CJ_VK_DEVICE");
+    VkPhysicalDevice phys = VK_NULL_HANDLE;
+    uint32_t family = 0;
+    for (uint32_t d = 0; d < n_phys && phys == VK_NULL_HANDLE; ++d) {
+        if (want && (uint32_t)atoi(want) != d) continue;
+        uint32_t n_fam = 0;
+        vkGetPhysicalDeviceQueueFamilyProperties(physs[d], &n_fam, NULL);
+        VkQueueFamilyProperties fams[32];
+        if (n_fam > 32) n_fam = 32;
+        vkGetPhysicalDeviceQueueFamilyProperties(physs[d], &n_fam, fams);
+        for (uint32_t f = 0; f < n_fam; ++f) {
+            if (fams[f].queueFlags & VK_QUEUE_COMPUTE_BIT) {
+                phys = physs[d];
+                family = f;
+                break;
+            }
+        }
+    }
+    if (phys == VK_NULL_HANDLE) {
+        fprintf(stderr, "cj_vk_host: no Vulkan device with a compute queue\n");
+        return 3;
+    }
+    VkPhysicalDeviceProperties props;
+    vkGetPhysicalDeviceProperties(phys, &props);
+
+    float prio = 1.0f;
+    VkDeviceQueueCreateInfo qci = {VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+    qci.queueFamilyIndex = family;
+    qci.queueCount = 1;
+    qci.pQueuePriorities = &prio;
+    VkDeviceCreateInfo dci = {VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+    dci.queueCreateInfoCount = 1;
+    dci.pQueueCreateInfos = &qci;
+    VkDevice dev;
+    CHECK(vkCreateDevice(phys, &dci, NULL, &dev), "vkCreateDevice");
+    VkQueue queue;
+    vkGetDeviceQueue(dev, family, 0, &queue);
+
+    VkBuffer bufs[2];
+    VkDeviceMemory mems[2];
+    for (int i = 0; i < 2; ++i)
+        if (make_buffer(phys, dev, out_size, &bufs[i], &mems[i])) return 1;
+    void *ptr;
+    CHECK(vkMapMemory(dev, mems[0], 0, out_size, 0, &ptr), "vkMapMemory");
+    memcpy(ptr, in, in_size);
+    vkUnmapMemory(dev, mems[0]);
+    CHECK(vkMapMemory(dev, mems[1], 0, out_size, 0, &ptr), "vkMapMemory");
+    memset(ptr, 0xFF, out_size); /* NaN everywhere: a field the shader forgets cannot pass */
+    vkUnmapMemory(dev, mems[1]);
+
+    VkShaderModuleCreateInfo smi = {VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+    smi.codeSize = spv_size;
+    smi.pCode = spv;
+    VkShaderModule module;
+    CHECK(vkCreateShaderModule(dev, &smi, NULL, &module), "vkCreateShaderModule");
+
+    VkDescriptorSetLayoutBinding binds[2] = {
+        {0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL},
+        {1, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL},
+    };
+    VkDescriptorSetLayoutCreateInfo dli = {VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+    dli.bindingCount = 2;
+    dli.pBindings = binds;
+    VkDescriptorSetLayout dsl;
+    CHECK(vkCreateDescriptorSetLayout(dev, &dli, NULL, &dsl), "vkCreateDescriptorSetLayout");
+    VkPushConstantRange pcr = {VK_SHADER_STAGE_COMPUTE_BIT, 0, 4};
+    VkPipelineLayoutCreateInfo pli = {VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+    pli.setLayoutCount = 1;
+    pli.pSetLayouts = &dsl;
+    pli.pushConstantRangeCount = 1;
+    pli.pPushConstantRanges = &pcr;
+    VkPipelineLayout layout;
+    CHECK(vkCreatePipelineLayout(dev, &pli, NULL, &layout), "vkCreatePipelineLayout");
+    VkComputePipelineCreateInfo cpi = {VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+    cpi.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+    cpi.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+    cpi.stage.module = module;
+    cpi.stage.pName = "main";
+    cpi.layout = layout;
+    VkPipeline pipeline;
+    CHECK(vkCreateComputePipelines(dev, VK_NULL_HANDLE, 1, &cpi, NULL, &pipeline), "vkCreateComputePipelines");
+
+    VkDescriptorPoolSize ps = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2};
+    VkDescriptorPoolCreateInfo dpi = {VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+    dpi.maxSets = 1;
+    dpi.poolSizeCount = 1;
+    dpi.pPoolSizes = &ps;
+    VkDescriptorPool pool;
+    CHECK(vkCreateDescriptorPool(dev, &dpi, NULL, &pool), "vkCreateDescriptorPool");
+    VkDescriptorSetAllocateInfo dsai = {VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+    dsai.descriptorPool = pool;
+    dsai.descriptorSetCount = 1;
+    dsai.pSetLayouts = &dsl;
+    VkDescriptorSet set;
+    CHECK(vkAllocateDescriptorSets(dev, &dsai, &set), "vkAllocateDescriptorSets");
+    VkDescriptorBufferInfo dbi[2] = {{bufs[0], 0, VK_WHOLE_SIZE}, {bufs[1], 0, VK_WHOLE_SIZE}};
+    VkWriteDescriptorSet w[2];
+    for (int i = 0; i < 2; ++i) {
+        memset(&w[i], 0, sizeof w[i]);
+        w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+        w[i].dstSet = set;
+        w[i].dstBinding = (uint32_t)i;
+        w[i].descriptorCount = 1;
+        w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        w[i].pBufferInfo = &dbi[i];
+    }
+    vkUpdateDescriptorSets(dev, 2, w, 0, NULL);
+
+    VkCommandPoolCreateInfo cpci = {VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+    cpci.queueFamilyIndex = family;
+    VkCommandPool cmd_pool;
+    CHECK(vkCreateCommandPool(dev, &cpci, NULL, &cmd_pool), "vkCreateCommandPool");
+    VkCommandBufferAllocateInfo cbai = {VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    cbai.commandPool = cmd_pool;
+    cbai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cbai.commandBufferCount = 1;
+    VkCommandBuffer cmd;
+    CHECK(vkAllocateCommandBuffers(dev, &cbai, &cmd), "vkAllocateCommandBuffers");
+    VkCommandBufferBeginInfo cbbi = {VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    cbbi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    CHECK(vkBeginCommandBuffer(cmd, &cbbi), "vkBeginCommandBuffer");
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &set, 0, NULL);
+    vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, 4, &count);
+    vkCmdDispatch(cmd, (count + LOCAL_SIZE - 1) / LOCAL_SIZE, 1, 1);
+    VkMemoryBarrier barrier = {VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+    barrier.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+    barrier.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &barrier, 0,
+                         NULL, 0, NULL);
+    CHECK(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    VkSubmitInfo si = {VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    VkFenceCreateInfo fci = {VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    VkFence fence;
+    CHECK(vkCreateFence(dev, &fci, NULL, &fence), "vkCreateFence");
+    CHECK(vkQueueSubmit(queue, 1, &si, fence), "vkQueueSubmit");
+    CHECK(vkWaitForFences(dev, 1, &fence, VK_TRUE, 60ull * 1000000000ull), "vkWaitForFences");
+
+    CHECK(vkMapMemory(dev, mems[1], 0, out_size, 0, &ptr), "vkMapMemory");
+    FILE *out = fopen(argv[3], "wb");
+    if (!out || fwrite(ptr, 1, out_size, out) != out_size) {
+        fprintf(stderr, "cj_vk_host: cannot write %s\n", argv[3]);
+        return 1;
+    }
+    fclose(out);
+    vkUnmapMemory(dev, mems[1]);
+    printf("%s\n", props.deviceName);
+
+    vkDestroyFence(dev, fence, NULL);
+    vkDestroyCommandPool(dev, cmd_pool, NULL);
+    vkDestroyDescriptorPool(dev, pool, NULL);
+    vkDestroyPipeline(dev, pipeline, NULL);
+    vkDestroyPipelineLayout(dev, layout, NULL);
+    vkDestroyDescriptorSetLayout(dev, dsl, NULL);
+    vkDestroyShaderModule(dev, module, NULL);
+    for (int i = 0; i < 2; ++i) {
+        vkDestroyBuffer(dev, bufs[i], NULL);
+        vkFreeMemory(dev, mems[i], NULL);
+    }
+    vkDestroyDevice(dev, NULL);
+    vkDestroyInstance(inst, NULL);
+    free(spv);
+    free(in);
+    return 0;
+}
