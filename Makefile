@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test figures lint clean
+.PHONY: demo test figures lint clean export conformance
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -25,6 +25,15 @@ figures: $(STAMP)
 	$(PY) -m experiments.kernel_approximations
 	$(PY) -m experiments.start_point_throughput
 	$(VENV)/bin/caustics-jax demo
+
+# Shader reference data (docs/export.md) and the GLSL ports run against it on a Vulkan
+# device (lavapipe: apt-get install glslang-tools libvulkan1 libvulkan-dev mesa-vulkan-drivers).
+REFDATA := out/refdata
+export: $(STAMP)
+	$(VENV)/bin/caustics-jax export --out $(REFDATA) --count 1024 --seed 0
+
+conformance: export
+	$(VENV)/bin/caustics-jax conformance $(REFDATA) --json $(REFDATA)/conformance.json
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check caustics_jax experiments tests

@@ -843,8 +843,13 @@ def c_header(kernels: list[Kernel]) -> str:
         sname = f"cj_{k.name}_record"
         lines.append(f"/* {k.name}: {k.equations} */")
         lines.append(f"typedef struct {sname} {{")
-        lines += [_c_field(f, off) for f, off in zip(k.fields, offsets, strict=True)]
-        last = offsets[-1] + k.fields[-1].size
+        end = 0
+        for f, off in zip(k.fields, offsets, strict=True):
+            if off > end:  # std430 alignment gap (vec2 on 8, vec3/vec4 on 16 bytes)
+                lines.append(f"    uint8_t _pad_{f.name}[{off - end}];")
+            lines.append(_c_field(f, off))
+            end = off + f.size
+        last = end
         if stride > last:
             lines.append(f"    uint8_t _pad_end[{stride - last}];")
         lines.append(f"}} {sname};")

@@ -1,0 +1,237 @@
+"""`caustics-jax export`: layout, round trip from the manifest alone, determinism, tolerances,
+and the reference values checked against closed forms the export does not use."""
+
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from caustics_jax import cli
+from caustics_jax import export as ex
+from caustics_jax.testing import _refract_np
+
+COUNT = 32
+REQUIRED = {"kernel", "equations", "count", "stride", "fields", "tolerance", "seed", "version", "cases"}
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("refdata")
+    ex.export(out, count=COUNT, seed=7)
+    return out
+
+
+def _manifest(data, kernel):
+    return json.loads((data / f"{kernel}.json").read_text())
+
+
+def _read_with_numpy(manifest: dict, raw: bytes) -> np.ndarray:
+    """A consumer's reader: a numpy structured dtype built from nothing but the manifest."""
+    formats = [(np.dtype({"float32": "<f4", "int32": "<i4", "uint32": "<u4"}[f["dtype"]]), tuple(f["storage_shape"]))
+               for f in manifest["fields"]]
+    dtype = np.dtype({"names": [f["name"] for f in manifest["fields"]], "formats": formats,
+                      "offsets": [f["offset"] for f in manifest["fields"]], "itemsize": manifest["stride"]})
+    return np.frombuffer(raw, dtype, count=manifest["count"])
+
+
+def _logical(rec, field):
+    """Drop the vec3 padding column."""
+    v = rec[field["name"]]
+    return v[..., : field["shape"][-1]] if field["shape"] != field["storage_shape"] else v
+
+
+@pytest.mark.parametrize("kernel", list(ex.KERNELS))
+def test_manifest_describes_a_std430_layout_that_tiles_the_binary(data, kernel):
+    m = _manifest(data, kernel)
+    assert REQUIRED <= set(m) and m["kernel"] == kernel and m["seed"] == 7
+    assert m["version"]["format"] == ex.FORMAT_VERSION
+    raw = (data / f"{kernel}.bin").read_bytes()
+    assert len(raw) == m["count"] * m["stride"]
+    assert m["count"] == COUNT + m["cases"]["adversarial"]["count"]
+    end, max_align = 0, 4
+    for f in sorted(m["fields"], key=lambda f: f["offset"]):
+        assert {"name", "dtype", "shape", "offset", "role"} <= set(f)
+        assert f["role"] in ("input", "output", "case")
+        assert f["offset"] >= end, f"{f['name']} overlaps the previous field"
+        base = f["glsl"].split("[")[0]
+        align = {"vec2": 8, "vec3": 16, "vec4": 16}.get(base, 4)
+        assert f["offset"] % align == 0, f"{f['name']} breaks std430 alignment"
+        max_align = max(max_align, align)
+        if base == "vec3":
+            assert f["storage_shape"][-1] == 4 and f["shape"][-1] == 3  # padded to 16 bytes
+        end = f["offset"] + 4 * int(np.prod(f["storage_shape"], dtype=int))
+    assert end <= m["stride"] and m["stride"] % max_align == 0
+    assert {f["role"] for f in m["fields"]} == {"input", "output", "case"}
+
+
+@pytest.mark.parametrize("kernel", list(ex.KERNELS))
+def test_records_round_trip_through_a_reader_built_from_the_manifest_only(data, kernel):
+    m = _manifest(data, kernel)
+    raw = (data / f"{kernel}.bin").read_bytes()
+    rec = _read_with_numpy(m, raw)
+    mine = ex.read_records(m, raw)
+    for f in m["fields"]:
+        np.testing.assert_array_equal(_logical(rec, f), mine[f["name"]])
+        assert np.all(np.isfinite(mine[f["name"]])), f"{kernel}.{f['name']} holds NaN/Inf"
+        if f["glsl"].startswith("vec3"):
+            assert np.all(rec[f["name"]][..., 3] == 0), "vec3 padding must be zero"
+    # packing what was read gives the same bytes back
+    assert ex.pack_records(ex.KERNELS[kernel], mine) == raw
+    # every record carries a case tag, and every kind of case is there
+    tags = mine["case_tag"]
+    for name, info in m["cases"].items():
+        assert info["count"] == np.sum(tags == info["code"]) > 0, name
+    assert set(np.unique(tags)) == set(ex.CASES.values())
+
+
+def test_same_seed_same_bytes_and_another_seed_other_bytes(tmp_path):
+    kernels = ["refract", "edge_intersections"]
+    for name, seed in (("a", 3), ("b", 3), ("c", 4)):
+        ex.export(tmp_path / name, kernels=kernels, count=16, seed=seed)
+    for f in sorted(p.name for p in (tmp_path / "a").iterdir()):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    assert (tmp_path / "a" / "refract.bin").read_bytes() != (tmp_path / "c" / "refract.bin").read_bytes()
+
+
+@pytest.mark.parametrize("kernel", list(ex.KERNELS))
+def test_tolerances_are_positive_finite_and_cover_storage_rounding(data, kernel):
+    m = _manifest(data, kernel)
+    outputs = [f for f in m["fields"] if f["role"] == "output"]
+    assert set(m["tolerance"]) == {f["name"] for f in outputs}
+    for f in outputs:
+        tol = m["tolerance"][f["name"]]
+        if f["dtype"] != "float32":
+            assert tol == {"exact": True}
+            continue
+        assert np.isfinite(tol["abs"]) and np.isfinite(tol["rel"]) and tol["abs"] >= 0
+        # at least the float32 storage rounding of the reference, and far from useless
+        assert 2.0**-24 <= tol["rel"] < 1e-3, tol
+        assert tol["abs"] < 1e-3, tol
+        if tol["audit"]:  # never tighter than what the 200k-path audit measured
+            assert max(tol["abs"], tol["rel"]) >= tol["audit"]["max"]
+
+
+def test_references_agree_with_independent_closed_forms(data):
+    """Outputs are float64 answers for the stored float32 inputs, rounded once to float32."""
+    _, r = ex.load(data, "refract")
+    T = _refract_np(r["I"].astype(np.float64), r["N"].astype(np.float64), r["eta"].astype(np.float64)[:, None])
+    np.testing.assert_allclose(r["T"], T, rtol=0, atol=2.0**-24 * 2)
+    assert np.any(np.all(r["T"] == 0, -1)), "a total internal reflection case exists"
+
+    _, r = ex.load(data, "fresnel")
+    planted = r["case_tag"] == ex.CASES["planted"]  # normal incidence
+    eta = r["eta"][planted].astype(np.float64)
+    np.testing.assert_allclose(r["R"][planted], ((eta - 1) / (eta + 1)) ** 2, rtol=2.0**-23, atol=1e-12)
+
+    _, r = ex.load(data, "photon_compression")
+    planted = r["case_tag"] == ex.CASES["planted"]  # flat patch: caustic triangle is a translate
+    np.testing.assert_allclose(r["sigma"][planted], r["s"][planted].astype(np.float64) ** r["c"][planted], rtol=1e-5)
+
+    _, r = ex.load(data, "bilateral_weight")
+    planted = r["case_tag"] == ex.CASES["planted"]  # q = p
+    np.testing.assert_allclose(r["w"][planted], 1 / r["eps"][planted].astype(np.float64), rtol=2.0**-23)
+
+    _, r = ex.load(data, "fixed_point")
+    planted = r["case_tag"] == ex.CASES["planted"]  # exact multiples of 2^-28, no overflow
+    codes = np.round(r["x"][planted].astype(np.float64) * 2**28).astype(np.uint64).sum(1)
+    np.testing.assert_array_equal(r["code"][planted], codes)
+    assert np.all(r["overflow"][planted] == 0)
+    assert np.any(r["overflow"] == 1), "an overflow case exists"
+
+    _, r = ex.load(data, "signed_sine")
+    planted = r["case_tag"] == ex.CASES["planted"]  # on refracted paths f vanishes
+    assert np.all(np.abs(r["f"][planted]) < 1e-6) and np.all(r["status"][planted] == 0)
+    assert set(np.unique(r["status"])) == {0, 1, 2}
+
+    _, r = ex.load(data, "d_factor")
+    assert np.all(r["valid"][r["case_tag"] == ex.CASES["planted"]] == 1)
+    assert np.all(r["D"][r["valid"] == 0] == 0)
+
+
+def test_edge_roots_solve_the_corrected_edge_quadratics(data):
+    """MATH.md §3's table, evaluated here independently: each stored root is a root."""
+    _, r = ex.load(data, "edge_intersections")
+    A, B, C, D, E, F = np.moveaxis(r["coef"].astype(np.float64), -1, 0)
+    quads = [(A, D, F), (A + B - C, C + E - 2 * A - D, A + D + F), (B, E, F)]
+    t, valid = r["t"].reshape(-1, 3, 2).astype(np.float64), r["valid"].reshape(-1, 3, 2)
+    for e, (q2, q1, q0) in enumerate(quads):
+        for k in range(2):
+            x = t[:, e, k]
+            residual = q2 * x * x + q1 * x + q0
+            scale = np.maximum(np.maximum(np.abs(q2), np.abs(q1)), np.abs(q0)) + 1e-300
+            ok = valid[:, e, k] == 1
+            assert np.all(np.abs(residual[ok]) <= 1e-5 * scale[ok]), (e, k)
+    assert np.all(t[valid == 0] == 0) and np.all((t >= 0) & (t <= 1))
+    planted = r["case_tag"] == ex.CASES["planted"]  # two roots on edges 0 and 2 by construction
+    assert np.all(valid[planted][:, [0, 2]] == 1)
+
+
+def test_compare_passes_the_reference_and_fails_a_perturbed_or_missing_output(data):
+    m, r = ex.load(data, "d_factor")
+    assert ex.compare(m, r, r)["pass_rate"] == 1.0
+    bad = dict(r, D=r["D"] * (1 + 1e-3))
+    report = ex.compare(m, r, bad)
+    assert report["pass_rate"] < 1 and report["fields"]["D"]["max_rel"] > 9e-4
+    nan = dict(r, D=np.full_like(r["D"], np.nan))
+    assert ex.compare(m, r, nan)["fields"]["D"]["pass_rate"] == 0.0
+    flipped = dict(r, valid=1 - r["valid"])
+    assert ex.compare(m, r, flipped)["fields"]["valid"]["mismatches"] == m["count"]
+
+
+def test_ulp_distance_counts_representable_floats_across_zero():
+    one = np.float32(1)
+    assert ex.ulp_distance(one, np.nextafter(one, np.float32(2))) == 1
+    tiny = np.float32(np.finfo(np.float32).smallest_subnormal)
+    assert ex.ulp_distance(-tiny, tiny) == 2
+    assert ex.ulp_distance(np.float32(np.nan), one) == 2**32
+
+
+def test_c_header_declares_each_record_and_reads_the_binary(data, tmp_path):
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    m, r = ex.load(data, "refract")
+    prog = tmp_path / "read.c"
+    prog.write_text(f"""
+#include <stdio.h>
+#include "{data / 'caustics_records.h'}"
+int main(void) {{
+    FILE *f = fopen("{data / 'refract.bin'}", "rb");
+    cj_refract_record rec;
+    double sum = 0;
+    unsigned n = 0, planted = 0;
+    while (fread(&rec, sizeof rec, 1, f) == 1) {{
+        sum += rec.T[0] + rec.T[1] + rec.T[2] + rec.eta;
+        planted += rec.case_tag == 1;
+        ++n;
+    }}
+    printf("%u %u %.9g\\n", n, planted, sum);
+    return 0;
+}}
+""")
+    exe = tmp_path / "read"
+    subprocess.run([cc, "-std=c11", "-Wall", "-Werror", "-o", str(exe), str(prog)], check=True)
+    n, planted, total = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split()
+    assert int(n) == m["count"] and int(planted) == m["cases"]["planted"]["count"]
+    expect = r["T"].astype(np.float64).sum() + r["eta"].astype(np.float64).sum()
+    assert float(total) == pytest.approx(expect, rel=1e-7)
+    header = (data / "caustics_records.h").read_text()
+    assert all(f"cj_{k}_record" in header for k in ex.KERNELS)
+
+
+def test_bad_arguments_raise_value_error_and_the_cli_says_why(tmp_path, capsys):
+    with pytest.raises(ValueError, match="unknown kernel"):
+        ex.export(tmp_path, kernels=["refrakt"])
+    with pytest.raises(ValueError, match="count"):
+        ex.export(tmp_path, count=2)
+    with pytest.raises(ValueError, match="seed"):
+        ex.export(tmp_path, seed=-1)
+    assert cli.main(["export", "--out", str(tmp_path), "--kernels", "nope"]) == 2
+    assert "unknown kernel" in capsys.readouterr().err
+    assert cli.main(["export", "--out", str(tmp_path / "ok"), "--kernels", "fresnel", "--count", "8"]) == 0
+    assert (tmp_path / "ok" / "fresnel.bin").exists() and (tmp_path / "ok" / "caustics_records.h").exists()
+    with pytest.raises(ValueError, match="bytes"):
+        m, _ = ex.load(tmp_path / "ok", "fresnel")
+        ex.read_records(m, b"\0" * 3)
