@@ -1,0 +1,357 @@
+# %% [markdown]
+# # Stress suite: every kernel and solver on adversarial configurations
+#
+# Issue 7, part 1. Each category of `caustics_jax.stress` (grazing light, near total
+# internal reflection, sliver triangles, constant normals, vertices and edges, `P` next
+# to the surface, far light, scales 1e-3 and 1e4, a large mesh) plants refracted paths on
+# a surface; every kernel is evaluated at the planted point and every solver is run
+# from the segment `P -> L`, in float32 and float64. Counted per category and dtype:
+#
+# - **non-finite**: lanes with a NaN/Inf in any output (goal 0);
+# - **silent failures**: lanes reported FOUND whose `|residual| > tol`, or whose
+#   refraction-angle error (float64 re-evaluation, `testing.refraction_angle_error`, on
+#   the data the solver saw: the float32 mesh and paths cast exactly to float64) exceeds
+#   `10 tol` (`f` is the sine of that angle, so `tol` bounds it; goal 0);
+# - found fraction, status counts, angle-error distribution, and per kernel its error
+#   against a reference (planted truth, an independent float64 formula, or the float64
+#   kernel).
+#
+# Run: `python -m experiments.stability` (writes `figures/stability.json`,
+# `figures/stability.png`; about 4 minutes on 2 cores) or `--quick` (about 1 minute: fewer
+# lanes, no `large` category).
+
+# %%
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import caustics_jax as cj  # noqa: E402
+from caustics_jax import stress  # noqa: E402
+from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES, _NumpyMesh  # noqa: E402
+from caustics_jax.conic import conic_value  # noqa: E402
+from caustics_jax.solvers import Status  # noqa: E402
+from caustics_jax.solvers.walk import default_tol  # noqa: E402
+from caustics_jax.testing import _refract_np, _unit, refraction_angle_error  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+DTYPES = ("float32", "float64")
+KERNELS = ("refract", "fresnel", "conic_coefficients", "conic_tangent", "edge_intersections",
+           "signed_sine", "ray_differential_D")
+# The Newton configuration compare.py ranks best on the default pool (docs/solvers.md).
+SOLVERS = {"walk": ("walk", {}), "newton": CONFIGS["newton-hv"], "exhaustive": ("exhaustive", {})}
+SILENT_ANGLE_FACTOR = 10.0
+
+
+def _log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _stats(x):
+    x = np.asarray(x, np.float64)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return {"median": None, "p99": None, "max": None, "n": 0}
+    return {"median": float(np.median(x)), "p99": float(np.quantile(x, 0.99)), "max": float(x.max()),
+            "n": int(x.size)}
+
+
+def _nonfinite(*arrays):
+    """Lanes (axis 0) with a NaN/Inf in any of `arrays`."""
+    bad = np.zeros(len(arrays[0]), bool)
+    for a in arrays:
+        a = np.asarray(a)
+        bad |= ~np.all(np.isfinite(a.reshape(len(a), -1)), -1)
+    return bad
+
+
+# %% kernels
+def _path_frame(V, N, P, L, ab):
+    """`M`, `n_s`, `w_P` in float64 numpy (MATH.md §1), for the kernels' direct inputs."""
+    a, b = ab[:, :1], ab[:, 1:]
+    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
+    n_t = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
+    return M, _unit(n_t), n_t, _unit(P - M)
+
+
+@jax.jit
+def _all_kernels(V, N, P, L, ab, I, Ns, cos_i, eta):
+    coef = cj.conic_coefficients(V, N, P, L)
+    t, valid = cj.edge_intersections(coef)
+    f_plane, status = cj.signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
+    D, D_ok = cj.ray_differential_D(V, N, P, L, ab, eta)
+    return {
+        "refract": cj.refract(I, Ns, eta),
+        "fresnel": cj.fresnel_transmittance(cos_i, 1 / eta),
+        "conic_coefficients": coef,
+        "conic_tangent": cj.conic_tangent(coef, ab),
+        "edge_intersections": (t, valid),
+        "signed_sine": (f_plane, cj.signed_sine(V, N, P, L, ab, eta), status),
+        "ray_differential_D": (D, D_ok),
+    }
+
+
+def run_kernels(case: stress.StressCase) -> dict:
+    """Every kernel at the planted points, per dtype: non-finite lanes and an error."""
+    V, N = case.triangles()
+    M, n_s, n_t, w_P = _path_frame(V, N, case.P, case.L, case.ab)
+    I, Ns, cos_i = -w_P, -n_s, np.abs(np.sum(w_P * n_s, -1))
+    PL, PM = case.L - case.P, M - case.P
+    truth_scale = np.linalg.norm(n_t, axis=-1) * np.linalg.norm(PL, axis=-1) * np.linalg.norm(PM, axis=-1)
+    out = {}
+    with cj.precision("float64"):
+        D_ref = np.asarray(cj.autodiff_D(*(jnp.asarray(x) for x in (V, N, case.P, case.L, case.ab)), case.eta))
+        r_ref = _refract_np(I, Ns, case.eta)
+        k64 = None
+        for dtype in DTYPES:
+            args = [jnp.asarray(x, dtype) for x in (V, N, case.P, case.L, case.ab, I, Ns, cos_i)]
+            k = jax.tree.map(np.asarray, _all_kernels(*args, jnp.asarray(case.eta, dtype)))
+            if dtype == "float64":
+                k64 = k
+            out[dtype] = k
+        rows = {}
+        for dtype in DTYPES:
+            k = out[dtype]
+            row = {}
+            for name in KERNELS:
+                row[name] = {"nonfinite": int(_nonfinite(*jax.tree.leaves(k[name])).sum())}
+            f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
+            row["refract"]["error"] = _stats(np.max(np.abs(f64(k["refract"]) - r_ref), -1))
+            row["refract"]["reference"] = "independent float64 numpy refract"
+            coef = f64(k["conic_coefficients"])
+            # conic at the planted point: n~ . (PL x PM) = 0 on a refracted path (eq. 9-12)
+            res = np.abs(np.asarray(conic_value(jnp.asarray(coef), jnp.asarray(case.ab)))) / truth_scale
+            row["conic_coefficients"]["error"] = _stats(res)
+            row["conic_coefficients"]["reference"] = "conic value at planted M / (|n~||PL||PM|), truth 0"
+            t, valid = f64(k["edge_intersections"][0]), k["edge_intersections"][1]
+            edge_ab = np.asarray(cj.edge_barycentric(jnp.broadcast_to(jnp.arange(3)[:, None], t.shape),
+                                                     jnp.asarray(t)))
+            c64 = np.asarray(k64["conic_coefficients"])  # exact conic of the float64 data
+            val = np.asarray(conic_value(jnp.asarray(c64)[:, None, None], jnp.asarray(edge_ab)))
+            scale = np.max(np.abs(c64), -1)[:, None, None]
+            row["edge_intersections"]["error"] = _stats((np.abs(val) / np.where(scale > 0, scale, 1))[valid])
+            row["edge_intersections"]["reference"] = "float64 conic at the returned roots / max|coef|, truth 0"
+            f_plane, _, st = k["signed_sine"]
+            ok = st == cj.ObjectiveStatus.OK
+            row["signed_sine"]["error"] = _stats(np.abs(f64(f_plane))[ok])
+            row["signed_sine"]["reference"] = "|f| at planted M, truth 0"
+            row["signed_sine"]["not_ok"] = int((~ok).sum())
+            D, D_ok = f64(k["ray_differential_D"][0]), k["ray_differential_D"][1]
+            rel = np.abs(D - D_ref) / np.abs(D_ref)
+            row["ray_differential_D"]["error"] = _stats(rel[D_ok])
+            row["ray_differential_D"]["reference"] = "autodiff_D, float64"
+            row["ray_differential_D"]["valid"] = int(D_ok.sum())
+            if dtype == "float32":
+                row["fresnel"]["error"] = _stats(np.abs(f64(k["fresnel"]) - k64["fresnel"]))
+                tan64 = k64["conic_tangent"]
+                # relative to the coefficients' scale: the tangent itself vanishes at a
+                # singular point (normal incidence at a vertex, P, L and n~ aligned)
+                row["conic_tangent"]["error"] = _stats(
+                    np.linalg.norm(f64(k["conic_tangent"]) - tan64, axis=-1)
+                    / np.maximum(np.max(np.abs(k64["conic_coefficients"]), -1), 1e-300))
+            else:
+                row["fresnel"]["error"] = row["conic_tangent"]["error"] = _stats([])
+            row["fresnel"]["reference"] = "float64 kernel"
+            row["conic_tangent"]["reference"] = "float64 kernel, / max|coef|"
+            rows[dtype] = row
+    return rows
+
+
+# %% solvers
+def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
+    rows = {}
+    for dtype in DTYPES:
+        with cj.precision(dtype):
+            mesh = case.mesh(dtype)
+            # The problem the solver saw, exactly in float64: judge it on that.
+            seen = _NumpyMesh(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces),
+                              np.asarray(mesh.normals, np.float64))
+            P = np.asarray(case.P, dtype)
+            L = np.asarray(case.L, dtype)
+            row = {}
+            for name, (method, opts) in SOLVERS.items():
+                lanes, tol = slice(None), default_tol(dtype)
+                if method == "exhaustive":
+                    if dtype != "float64" or case.n_faces > MAX_REFERENCE_FACES or n_exhaustive == 0:
+                        continue
+                    lanes = slice(0, n_exhaustive)
+                    tol = 1e-9  # the exhaustive reference's acceptance (docs/solvers.md)
+                t0 = time.perf_counter()
+                sol = jax.block_until_ready(cj.solve(mesh, P[lanes], L[lanes], method=method, **opts))
+                seconds = time.perf_counter() - t0
+                found = np.asarray(sol.found)
+                tri, ab = np.asarray(sol.triangle), np.asarray(sol.barycentric, np.float64)
+                angle = np.full(len(found), np.nan)
+                P64, L64 = np.asarray(P[lanes], np.float64), np.asarray(L[lanes], np.float64)
+                angle[found] = refraction_angle_error(seen, tri[found], ab[found], P64[found], L64[found], case.eta)
+                residual = np.asarray(sol.residual, np.float64)
+                silent = found & ((np.abs(residual) > tol) | (angle > SILENT_ANGLE_FACTOR * tol))
+                bad = _nonfinite(sol.point, sol.barycentric, sol.residual, sol.start_point)
+                row[name] = {
+                    "n": int(len(found)), "found": int(found.sum()), "silent": int(silent.sum()),
+                    "silent_lanes": np.nonzero(silent)[0].tolist()[:20],
+                    "nonfinite": int(bad.sum()), "status": sol.summary(), "tol": tol,
+                    "angle_error_rad": _stats(angle[found]),
+                    "crossed_mean": float(np.mean(np.asarray(sol.crossed)[found])) if found.any() else None,
+                    "seconds": seconds,
+                }
+            rows[dtype] = row
+    return rows
+
+
+def run(n: int = 256, n_exhaustive: int = 64, categories=stress.CATEGORIES, seed: int = 0) -> dict:
+    cj.enable_x64()  # float64 available; every float32 array is built explicitly
+    result = {"n": n, "n_exhaustive": n_exhaustive, "seed": seed, "categories": {}}
+    for c in categories:
+        t0 = time.perf_counter()
+        case = stress.stress_case(c, n, seed)
+        kern = run_kernels(case)
+        solv = run_solvers(case, n_exhaustive)
+        result["categories"][c] = {"n_faces": case.n_faces, "kernels": kern, "solvers": solv}
+        _log(f"{c}: {time.perf_counter() - t0:.1f} s")
+    return result
+
+
+# %% report
+def totals(result) -> dict:
+    """Non-finite and silent counts over every category, per dtype and component."""
+    out = {}
+    for r in result["categories"].values():
+        for dtype in DTYPES:
+            for name, k in r["kernels"][dtype].items():
+                key = (dtype, name)
+                out.setdefault(key, {"nonfinite": 0, "silent": 0})["nonfinite"] += k["nonfinite"]
+            for name, s in r["solvers"][dtype].items():
+                key = (dtype, name)
+                out.setdefault(key, {"nonfinite": 0, "silent": 0})
+                out[key]["nonfinite"] += s["nonfinite"]
+                out[key]["silent"] += s["silent"]
+    return {f"{d}/{n}": v for (d, n), v in out.items()}
+
+
+def _short(status: dict) -> str:
+    abbrev = {s.name: a for s, a in zip(Status, ("F", "NC", "TIR", "LM", "MS", "UE", "DG", "LC", "NCV", "NS"),
+                                        strict=True)}
+    return " ".join(f"{abbrev[k]}{v}" for k, v in status.items() if k != "FOUND") or "-"
+
+
+def table(result) -> str:
+    lines = []
+    head = ("| category | dtype | kernel NaN/Inf | max \\|f\\| at planted M | walk found | walk silent | walk NaN "
+            "| walk other statuses | walk angle err max | newton found | newton silent | newton NaN "
+            "| newton other statuses | newton angle err max | exhaustive found / silent / NaN |")
+    lines.append(head)
+    lines.append("|" + "---|" * (head.replace("\\|", "").count("|") - 1))
+    for c, r in result["categories"].items():
+        for dtype in DTYPES:
+            k, s = r["kernels"][dtype], r["solvers"][dtype]
+            knan = sum(v["nonfinite"] for v in k.values())
+            fmax = k["signed_sine"]["error"]["max"]
+            cells = [c, dtype, str(knan), f"{fmax:.1e}" if fmax is not None else "-"]
+            for name in ("walk", "newton"):
+                v = s[name]
+                amax = v["angle_error_rad"]["max"]
+                cells += [f"{v['found']}/{v['n']}", str(v["silent"]), str(v["nonfinite"]), _short(v["status"]),
+                          f"{amax:.1e}" if amax is not None else "-"]
+            if "exhaustive" in s:
+                v = s["exhaustive"]
+                cells.append(f"{v['found']}/{v['n']} / {v['silent']} / {v['nonfinite']}")
+            else:
+                cells.append("-")
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def kernel_table(result) -> str:
+    lines = ["| category | dtype | " + " | ".join(KERNELS) + " |", "|" + "---|" * (len(KERNELS) + 2)]
+    for c, r in result["categories"].items():
+        for dtype in DTYPES:
+            k = r["kernels"][dtype]
+            cells = []
+            for name in KERNELS:
+                e = k[name]["error"]["max"]
+                cells.append(("-" if e is None else f"{e:.1e}") + (f" ({k[name]['nonfinite']} NaN)"
+                                                                  if k[name]["nonfinite"] else ""))
+            lines.append(f"| {c} | {dtype} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot(result, path):
+    cats = list(result["categories"])
+    y = np.arange(len(cats))
+    fig, axes = plt.subplots(1, 2, figsize=(13, 0.42 * len(cats) + 2.4), sharey=True)
+    styles = {("walk", "float32"): ("C0", "o"), ("walk", "float64"): ("C0", "s"),
+              ("newton", "float32"): ("C1", "o"), ("newton", "float64"): ("C1", "s"),
+              ("exhaustive", "float64"): ("C2", "D")}
+    for j, ((name, dtype), (color, marker)) in enumerate(styles.items()):
+        off = (j - 2) * 0.13
+        frac, amax, a99 = [], [], []
+        for c in cats:
+            s = result["categories"][c]["solvers"][dtype].get(name)
+            frac.append(np.nan if s is None else s["found"] / s["n"])
+            e = None if s is None else s["angle_error_rad"]
+            amax.append(np.nan if not e or e["max"] is None else max(e["max"], 1e-17))
+            a99.append(np.nan if not e or e["p99"] is None else max(e["p99"], 1e-17))
+        face = color if dtype == "float64" else "white"
+        axes[0].scatter(frac, y + off, color=color, marker=marker, facecolor=face, label=f"{name} {dtype}")
+        axes[1].scatter(amax, y + off, color=color, marker=marker, facecolor=face, label=f"{name} {dtype} (max)")
+        axes[1].scatter(a99, y + off, color=color, marker="|", s=60)
+    for dtype, ls in (("float32", "--"), ("float64", ":")):
+        axes[1].axvline(default_tol(dtype), color="gray", ls=ls, lw=1, label=f"tol {dtype}")
+    axes[0].set_yticks(y, cats)
+    axes[0].invert_yaxis()
+    axes[0].set_xlabel("lanes FOUND (fraction of planted paths)")
+    axes[0].set_title("Success on planted paths, per stress category")
+    axes[0].legend(fontsize=7, loc="lower left")
+    axes[1].set_xscale("log")
+    axes[1].set_xlabel("refraction angle error of FOUND lanes (rad, float64 re-evaluation; marker max, bar p99)")
+    axes[1].set_title("Accuracy of what the solvers report as found")
+    axes[1].legend(fontsize=7, loc="lower right")
+    nan = sum(v["nonfinite"] for v in totals(result).values())
+    silent = sum(v["silent"] for v in totals(result).values())
+    fig.suptitle(f"Stress suite: walk, optimistix Newton (half-vector) and exhaustive, float32 (open) / "
+                 f"float64 (filled), {result['n']} paths per category; NaN/Inf lanes {nan}, silent failures {silent}",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# %%
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true", help="64 paths, 16 exhaustive lanes, no `large`")
+    ap.add_argument("--out", default=str(ROOT / "figures"))
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    if args.quick:
+        result = run(64, 16, tuple(c for c in stress.CATEGORIES if c != "large"))
+    else:
+        result = run(256, 64)
+    result["totals"] = totals(result)
+    result["seconds"] = time.perf_counter() - t0
+    out = pathlib.Path(args.out)
+    out.mkdir(exist_ok=True)
+    (out / "stability.json").write_text(json.dumps(result, indent=1))
+    plot(result, out / "stability.png")
+    print(table(result))
+    print()
+    print(kernel_table(result))
+    print()
+    print("totals:", json.dumps(result["totals"]))
+    print(f"{result['seconds']:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
