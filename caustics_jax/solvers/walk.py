@@ -43,10 +43,11 @@ from ..conic import (
     solve_quadratic,
 )
 from ..mesh import SurfaceMesh, cross_edge
-from ..objectives import ObjectiveStatus, path_vectors, signed_sine_and_status
+from ..objectives import ObjectiveStatus, path_vectors, refracted_direction, signed_sine_and_status
 from ._solution import Status
 
 WALK, BISECT, DONE = 0, 1, 2
+_BACKWARD = max(ObjectiveStatus) + 1  # walk-local objective status: refracted ray points away from L
 # Inward normal of each edge in barycentric space: b = 0 -> +b, a + b = 1 -> -(a + b), a = 0 -> +a.
 _INWARD = ((0.0, 1.0), (-1.0, -1.0), (1.0, 0.0))
 
@@ -177,7 +178,13 @@ def _f(V, N, P, L, ab, eta):
     def one(x):
         f, st = signed_sine_and_status(V, N, P, L, x, eta, orientation="plane")
         g, _ = signed_sine_and_status(V, N, P, L, x, eta, orientation="line")
-        return f, st, g
+        # f is a sine: it also vanishes where the refracted ray points away from L (angle
+        # pi), and changes sign there in both orientations. Such points are no solution
+        # (as in the exhaustive reference); a status other than OK keeps them out of
+        # every bracket and acceptance, and the walk goes on through them as through TIR.
+        _, _, _, w_L, _ = path_vectors(V, N, P, L, x)
+        backward = (st == ObjectiveStatus.OK) & (jnp.sum(refracted_direction(V, N, P, L, x, eta) * w_L) <= 0)
+        return f, jnp.where(backward, _BACKWARD, st), g
 
     return jax.vmap(one)(ab)
 

@@ -1,0 +1,110 @@
+"""Fast subset of the stress suite (experiments/stability.py): adversarial planted paths
+from `caustics_jax.stress`, every kernel and the walk and Newton solvers, float32 and
+float64: no NaN/Inf for finite input, and no silent failure (a lane reported FOUND whose
+residual or refraction-angle error is above what the tolerance allows).
+
+Each category is one batch (64 lanes) on a 2048-triangle pool: one compile per solver and
+dtype serves every category.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import caustics_jax as cj
+from caustics_jax import scenes, stress
+from caustics_jax.solvers import Status
+from caustics_jax.solvers.walk import default_tol
+from caustics_jax.testing import _unit, refraction_angle_error
+
+DTYPES = ["float32", "float64"]
+CATEGORIES = [c for c in stress.CATEGORIES if c != "large"]
+N = 64
+# A FOUND lane's angle error (float64 re-evaluation on the data the solver saw) may exceed
+# tol only by rounding: |f| <= tol bounds the sine of that angle. The stress suite measured
+# at most 1.0x tol over every category (walk, float32 and float64); 10x flags a wrong point.
+SILENT_FACTOR = 10.0
+
+
+@functools.cache
+def _case(category):
+    return stress.stress_case(category, N, seed=0)
+
+
+class _Seen:
+    """The mesh as the solver saw it (its dtype), exactly in float64."""
+
+    def __init__(self, mesh):
+        self.vertices = np.asarray(mesh.vertices, np.float64)
+        self.faces = np.asarray(mesh.faces)
+        self.normals = np.asarray(mesh.normals, np.float64)
+
+
+def _silent_and_nonfinite(case, mesh, P, L, sol, tol):
+    found = np.asarray(sol.found)
+    for name in ("point", "barycentric", "residual", "start_point"):
+        assert np.all(np.isfinite(np.asarray(getattr(sol, name)))), name
+    np.testing.assert_array_equal(found, np.asarray(sol.status) == Status.FOUND)
+    angle = refraction_angle_error(_Seen(mesh), np.asarray(sol.triangle)[found],
+                                   np.asarray(sol.barycentric, np.float64)[found],
+                                   np.asarray(P, np.float64)[found], np.asarray(L, np.float64)[found], case.eta)
+    residual = np.abs(np.asarray(sol.residual, np.float64))[found]
+    return np.nonzero(found)[0][(residual > tol) | (angle > SILENT_FACTOR * tol)]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("method", ["walk", "newton"])
+def test_solvers_on_adversarial_paths_report_no_nan_and_no_silent_failure(method, dtype):
+    with cj.precision(dtype):
+        for category in CATEGORIES:
+            case = _case(category)
+            mesh = case.mesh(dtype)
+            P, L = np.asarray(case.P, dtype), np.asarray(case.L, dtype)
+            sol = cj.solve(mesh, P, L, method=method)
+            silent = _silent_and_nonfinite(case, mesh, P, L, sol, default_tol(dtype))
+            assert silent.size == 0, (category, silent, sol.summary())
+
+
+@jax.jit
+def _kernels(V, N, P, L, ab, I, Ns, cos_i, eta):
+    coef = cj.conic_coefficients(V, N, P, L)
+    return (cj.refract(I, Ns, eta), cj.fresnel_transmittance(cos_i, 1 / eta), coef,
+            cj.conic_tangent(coef, ab), cj.edge_intersections(coef)[0],
+            cj.signed_sine(V, N, P, L, ab, eta), cj.signed_sine(V, N, P, L, ab, eta, "plane"),
+            cj.ray_differential_D(V, N, P, L, ab, eta)[0])
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_kernels_on_adversarial_paths_return_no_nan(dtype):
+    cases = [_case(c) for c in stress.CATEGORIES if c != "large"]
+    V, Nv = (np.concatenate(x) for x in zip(*(c.triangles() for c in cases), strict=True))
+    P, L, ab = (np.concatenate([getattr(c, k) for c in cases]) for k in ("P", "L", "ab"))
+    M = np.concatenate([c.M for c in cases])
+    a, b = ab[:, :1], ab[:, 1:]
+    n_s = _unit(Nv[:, 0] + a * (Nv[:, 1] - Nv[:, 0]) + b * (Nv[:, 2] - Nv[:, 0]))
+    w_P = _unit(P - M)
+    with cj.precision(dtype):
+        args = [jnp.asarray(x, dtype) for x in (V, Nv, P, L, ab, -w_P, -n_s, np.sum(w_P * n_s, -1))]
+        out = _kernels(*args, jnp.asarray(stress.ETA, dtype))
+    for name, x in zip(("refract", "fresnel", "conic", "tangent", "edges", "f", "f_plane", "D"), out, strict=True):
+        x = np.asarray(x)
+        assert x.dtype == np.dtype(dtype), name
+        bad = ~np.isfinite(x.reshape(len(x), -1)).all(-1)
+        assert not bad.any(), (name, np.nonzero(bad)[0][:10])
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_walk_accepts_m0_where_the_conic_is_singular_at_the_solution(dtype):
+    # A light straight above each receiver of a flat pool: M0 is the solution, and with P,
+    # L and the constant normal aligned every point of the plane satisfies eq. 9 (the
+    # conic is identically zero). The walk used to call these lanes DEGENERATE.
+    with cj.precision(dtype):
+        sc = scenes.flat_pool(2048, n_receivers=8, dtype=dtype)
+        P = np.asarray(sc.receivers)
+        L = P + np.asarray([0.0, 0.0, 3.0], dtype)
+        sol = cj.solve(sc.surface, P, L, method="walk")
+    assert np.all(np.asarray(sol.found)), sol.summary()
+    np.testing.assert_allclose(np.asarray(sol.point)[:, :2], P[:, :2], atol=1e-6)
