@@ -306,7 +306,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
         mode = jnp.where(at_m0, DONE, mode)
         status = jnp.where(at_m0, Status.FOUND, status)
         # Terminal conditions that override everything else, most specific last.
-        degenerate = singular | (st0 == ObjectiveStatus.DEGENERATE)
+        # A singular conic at a solution M0 does not matter (P, L and the normal aligned
+        # on a flat surface make every point of the plane "coplanar"): M0 stays FOUND.
+        degenerate = (singular & ~at_m0) | (st0 == ObjectiveStatus.DEGENERATE)
         mode = jnp.where(degenerate, DONE, mode)
         status = jnp.where(degenerate, Status.DEGENERATE, status)
         mode = jnp.where(found, mode, DONE)
