@@ -71,3 +71,17 @@ def test_conformance_table_lists_every_output(device, tmp_path):
     reports = [conf.run_kernel(data, k, work, host=host) for k in ("refract", "fixed_point")]
     table = conf.format_table(reports)
     assert "| refract | T |" in table and "| fixed_point | code (exact) |" in table
+
+
+@pytest.mark.parametrize("kernel, line, wrong", [
+    ("d_factor", "vec3 w_L_d = -eta * W[j]", "vec3 w_L_d = eta * W[j]"),  # eq. 31 as extracted
+    ("edge_intersections", "const float tol = 64.0 * CJ_EPS;", "const float tol = 0.0;"),  # no root window
+    ("photon_compression", "cj_refract(l_dir, n, 1.0 / eta)", "cj_refract(l_dir, n, eta)"),  # inverted ratio
+    ("fixed_point", "uint(roundEven(max(x, 0.0) * 268435456.0))", "uint(max(x, 0.0) * 268435456.0)"),  # truncation
+])
+def test_other_plausible_wrong_lines_fail_conformance(device, kernel, line, wrong):
+    data, work, host = device
+    source = conf.shader_source(kernel)
+    assert source.count(line) == 1
+    report = conf.run_kernel(data, kernel, work, host=host, source=source.replace(line, wrong))
+    assert report["pass_rate"] < 1.0

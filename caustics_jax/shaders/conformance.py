@@ -166,15 +166,18 @@ def run_conformance(data_dir, kernels=None, work_dir=None) -> list[dict]:
 
 
 def format_table(reports: list[dict]) -> str:
-    """Markdown table: per kernel and float output, max abs / rel / ULP error and pass rate."""
-    rows = ["| kernel | output | records | max abs | max rel | max ULP | pass rate |", "|---|---|---|---|---|---|---|"]
+    """Markdown table: per kernel and output, max abs / rel / ULP error, tolerance and pass rate."""
+    rows = ["| kernel | output | records | max abs | max rel | max ULP | tol abs | tol rel | max err/tol | pass rate |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     for r in reports:
         for name, f in r["fields"].items():
             if "max_abs" in f:
                 rows.append(f"| {r['kernel']} | {name} | {r['count']} | {f['max_abs']:.2e} | {f['max_rel']:.2e} | "
-                            f"{f['max_ulp']} | {f['pass_rate']:.4f} |")
+                            f"{f['max_ulp']} | {f['tol_abs']:.1e} | {f['tol_rel']:.1e} | {f['max_err_over_tol']:.2f} | "
+                            f"{f['pass_rate']:.4f} |")
             else:
-                rows.append(f"| {r['kernel']} | {name} (exact) | {r['count']} | - | - | - | {f['pass_rate']:.4f} |")
+                rows.append(f"| {r['kernel']} | {name} (exact) | {r['count']} | - | - | - | 0 | 0 | - | "
+                            f"{f['pass_rate']:.4f} |")
     return "\n".join(rows)
 
 

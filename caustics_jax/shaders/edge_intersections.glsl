@@ -35,7 +35,7 @@ void cj_edge_intersections(float coef[6], out float t[6], out uint valid[6]) {
     quad[0] = vec3(A, D, F);                                   // b = 0 (eq. 23 prints A a^2 + C a + F)
     quad[1] = vec3(A + B - C, C + E - 2.0 * A - D, A + D + F); // a = 1 - b (eq. 24)
     quad[2] = vec3(B, E, F);                                   // a = 0 (eq. 22 prints B b^2 + D b + F)
-    const float tol = 64.0 * CJ_EPS;  // the Python kernel's default, 64 eps of the dtype
+    const float tol = 64.0 * CJ_EPS;  // the Python kernel's float32 default (export.EDGE_TOL)
     for (int k = 0; k < 3; ++k) {
         vec2 roots;
         bvec2 ok;
