@@ -37,12 +37,12 @@ import numpy as np
 
 from . import testing
 from ._precision import precision
-from .conic import conic_coefficients, conic_tangent, edge_intersections
+from .conic import conic_coefficients, conic_tangent, edge_intersections, edge_quadratics
 from .geometry import fresnel_reflectance, refract, safe_normalize
 from .kernels.bilateral import bilateral_weight
 from .kernels.collection import reuse_weight
 from .kernels.fixed_point import fixed_point_accumulate
-from .objectives import signed_sine_and_status
+from .objectives import path_vectors, signed_sine_and_status
 from .transport.differentials import ray_differential_D
 
 #: Format version of the manifest and binary layout; bump on any incompatible change.
@@ -182,8 +182,7 @@ def _gen_refract(rng, n):
     I = np.where(np.sum(I * N, -1, keepdims=True) > 0, -I, I)  # GLSL: dot(N, I) <= 0
     eta = rng.uniform(0.6, 1.5, 4 * n_rand)
     pl = _planted(rng, n_pl)
-    n_s = _unit(pl.N[:, 0] + pl.ab[:, :1] * (pl.N[:, 1] - pl.N[:, 0]) + pl.ab[:, 1:] * (pl.N[:, 2] - pl.N[:, 0]))
-    w_P = _unit(pl.P - pl.M)
+    _, n_s, w_P, _, _ = _f64(path_vectors, pl.V, pl.N, pl.P, pl.L, pl.ab)
     z, x = np.array([0, 0, 1.0]), np.array([1.0, 0, 0])
     g = _unit(np.array([0.6, 0, -0.8]))
     adv = {  # normal incidence, grazing, eta = 1, deep total internal reflection, exact zeros
@@ -304,15 +303,17 @@ def _gen_edges(rng, n):
                          ({"coef": adv}, CASES["adversarial"])])
 
 
-def _edge_polys(coef):
-    A, B, C, D, E, F = np.moveaxis(coef, -1, 0)
-    # MATH.md §3's corrected table, written out here only to *select* well-conditioned cases
-    return [(A, D, F), (A + B - C, C + E - 2 * A - D, A + D + F), (B, E, F)]
+def _f64(fn, *args):
+    """`fn` (a package kernel) on float64 numpy arguments, as numpy: for case selection."""
+    with precision("float64"):
+        out = jax.jit(fn)(*(jnp.asarray(a, jnp.float64) for a in args))
+        return jax.tree_util.tree_map(np.asarray, out)
 
 
 def _keep_edges(x, ref):
     ok = np.ones(len(x["coef"]), bool)
-    for q2, q1, q0 in _edge_polys(x["coef"]):
+    quads = _f64(edge_quadratics, x["coef"])  # (records, edge, (q2, q1, q0)), seed 001 eq. 22-24
+    for q2, q1, q0 in np.moveaxis(quads, (1, 2), (0, 1)):
         scale = np.maximum(np.maximum(np.abs(q2), np.abs(q1)), np.abs(q0))
         disc = q1 * q1 - 4 * q2 * q0
         rel_disc = disc / np.maximum(q1 * q1 + np.abs(4 * q2 * q0), 1e-300)
@@ -361,22 +362,18 @@ def _gen_signed_sine(rng, n):
 
 
 def _path_np(x):
-    """float64 numpy `n_s, w_P, w_L` and `r = refract(-w_P, -n_s, eta)` (for case selection)."""
-    a, b = x["ab"][:, :1], x["ab"][:, 1:]
-    V, N = x["V"], x["N"]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n_s = _unit(N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0]))
-    w_P, w_L = _unit(x["P"] - M), _unit(x["L"] - M)
+    """`n_s, w_P, w_L` (objectives.path_vectors), refract's `k` and `r = refract(-w_P, -n_s, eta)`, float64."""
+    _, n_s, w_P, w_L, _ = _f64(path_vectors, x["V"], x["N"], x["P"], x["L"], x["ab"])
     cos = np.sum(n_s * w_P, -1)
-    k = 1 - x["eta"] ** 2 * (1 - cos**2)
-    return n_s, w_P, w_L, k
+    k = (1 - x["eta"]) * (1 + x["eta"]) + (x["eta"] * cos) ** 2  # negative under TIR, as in geometry.refract
+    r = _f64(refract, -w_P, -n_s, x["eta"])
+    return n_s, w_P, w_L, k, r
 
 
 def _keep_signed_sine(x, ref):
-    n_s, w_P, w_L, k = _path_np(x)
-    r = testing._refract_np(-w_P, -n_s, x["eta"][:, None])
+    n_s, w_P, w_L, k, r = _path_np(x)
     c = np.cross(r, w_L)
-    o = np.cross(x["L"] - x["P"], n_s)
+    o = np.cross(x["L"] - x["P"], n_s)  # the 'plane' orientation reference of signed_sine_and_status
     sign_margin = np.abs(np.sum(c * o, -1)) / (np.linalg.norm(c, axis=-1) * np.linalg.norm(o, axis=-1) + 1e-300)
     return (np.abs(k) > 1e-2) & (sign_margin > 1e-2)
 
@@ -399,7 +396,7 @@ def _gen_D(rng, n):
 
 
 def _keep_D(x, ref):
-    n_s, w_P, w_L, k = _path_np(x)
+    n_s, w_P, w_L, k, _ = _path_np(x)
     E1, E2 = x["V"][:, 1] - x["V"][:, 0], x["V"][:, 2] - x["V"][:, 0]
     n_g = _unit(np.cross(E1, E2))
     # every validity threshold of ray_differential_D (sqrt(eps) of the dtype) far away
