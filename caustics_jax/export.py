@@ -37,6 +37,7 @@ import numpy as np
 
 from . import testing
 from ._precision import precision
+from .barycentric import barycentric_point
 from .conic import conic_coefficients, conic_tangent, edge_intersections, edge_quadratics
 from .geometry import fresnel_reflectance, refract, safe_normalize
 from .kernels.bilateral import bilateral_weight
@@ -55,7 +56,7 @@ SAFETY = 4.0
 #: measures at most ~10 ulps on the planted residuals) and of storing it as float32.
 F64_BUDGET = 64 * float(np.finfo(np.float64).eps)
 STORAGE_ROUNDING = 0.5 * float(np.finfo(np.float32).eps)
-#: Case tags, stored per record in the `case` field.
+#: Case tags, stored per record in the `case_tag` field (`case` is a keyword in C and GLSL).
 CASES = {"random": 0, "planted": 1, "adversarial": 2}
 AUDIT_FILE = Path(__file__).resolve().parent.parent / "figures" / "float32_audit.json"
 
@@ -147,6 +148,13 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def _f64(fn, *args):
+    """`fn` (a package kernel) on float64 numpy arguments, as numpy: to build and select cases."""
+    with precision("float64"):
+        out = jax.jit(fn)(*(jnp.asarray(a, jnp.float64) for a in args))
+        return jax.tree_util.tree_map(np.asarray, out)
+
+
 def _split(n: int) -> tuple[int, int]:
     """Planted and random record counts for `count = n` (a quarter planted)."""
     planted = n // 4
@@ -165,7 +173,7 @@ def _random_paths(rng, n, normal_spread=0.3):
     """Random triangles (testing.random_triangles), a random interior `ab`, P below, L above."""
     V, N = testing.random_triangles(rng, n, normal_spread=normal_spread)
     ab = rng.dirichlet([2.0, 2.0, 2.0], n)[:, 1:]
-    M = V[:, 0] + ab[:, :1] * (V[:, 1] - V[:, 0]) + ab[:, 1:] * (V[:, 2] - V[:, 0])
+    M = _f64(barycentric_point, V, ab)
     P = M + rng.uniform(-1, 1, (n, 3)) * [1, 1, 0] - rng.uniform(0.2, 2.0, (n, 1)) * [0, 0, 1]
     L = M + rng.uniform(-2, 2, (n, 3)) * [1, 1, 0] + rng.uniform(0.5, 5.0, (n, 1)) * [0, 0, 1]
     return V, N, P, L, ab
@@ -301,13 +309,6 @@ def _gen_edges(rng, n):
     ])
     return _stack_cases([({"coef": coef}, CASES["random"]), ({"coef": planted}, CASES["planted"]),
                          ({"coef": adv}, CASES["adversarial"])])
-
-
-def _f64(fn, *args):
-    """`fn` (a package kernel) on float64 numpy arguments, as numpy: for case selection."""
-    with precision("float64"):
-        out = jax.jit(fn)(*(jnp.asarray(a, jnp.float64) for a in args))
-        return jax.tree_util.tree_map(np.asarray, out)
 
 
 def _keep_edges(x, ref):
