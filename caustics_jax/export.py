@@ -877,7 +877,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
 
     `count` random and planted records per kernel (a quarter planted), plus each kernel's
     fixed adversarial cases. Same arguments, same bytes. Raises ValueError on unknown
-    kernel names or a count below 4.
+    kernel names, a count below 4, a negative seed or an `out_dir` that is a file.
     """
     names = list(KERNELS) if not kernels else list(kernels)
     unknown = [k for k in names if k not in KERNELS]
@@ -888,6 +888,8 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     audit = _audit()
     written = []

@@ -228,6 +228,9 @@ def test_bad_arguments_raise_value_error_and_the_cli_says_why(tmp_path, capsys):
         ex.export(tmp_path, count=2)
     with pytest.raises(ValueError, match="seed"):
         ex.export(tmp_path, seed=-1)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="not a directory"):
+        ex.export(tmp_path / "file", kernels=["fresnel"])
     assert cli.main(["export", "--out", str(tmp_path), "--kernels", "nope"]) == 2
     assert "unknown kernel" in capsys.readouterr().err
     assert cli.main(["export", "--out", str(tmp_path / "ok"), "--kernels", "fresnel", "--count", "8"]) == 0
