@@ -32,11 +32,24 @@ from .objectives import (
 )
 from .solvers import Solution, Status, solve
 from .start_points import start_points
-from .transport import autodiff_D, ray_differential_D
+from .transport import (
+    ReceiverGrid,
+    autodiff_D,
+    compression_ratio,
+    compression_ratio_exact,
+    footprint_ellipse,
+    irradiance,
+    path_irradiance,
+    photon_differential_irradiance,
+    photon_irradiance,
+    ray_differential_D,
+    texel_jacobian,
+)
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "ReceiverGrid",
     "Solution",
     "Status",
     "SurfaceMesh",
@@ -48,6 +61,9 @@ __all__ = [
     "angle_difference_residual",
     "autodiff_D",
     "barycentric_point",
+    "compression_ratio",
+    "compression_ratio_exact",
+    "footprint_ellipse",
     "conic_coefficients",
     "conic_tangent",
     "conic_value",
@@ -58,6 +74,10 @@ __all__ = [
     "fresnel_transmittance",
     "half_vector_residual",
     "interpolated_normal",
+    "irradiance",
+    "path_irradiance",
+    "photon_differential_irradiance",
+    "photon_irradiance",
     "precision",
     "ray_differential_D",
     "reflect",
@@ -67,4 +87,5 @@ __all__ = [
     "signed_sine_and_status",
     "solve_quadratic",
     "tangent_to_world",
+    "texel_jacobian",
 ]

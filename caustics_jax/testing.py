@@ -203,3 +203,53 @@ def assert_solution_sane(sol, tol: float, slack: float) -> None:
     assert np.all(np.abs(np.asarray(sol.residual)[found]) <= tol)
     ab = np.asarray(sol.barycentric)[found]
     assert np.all(ab >= -slack) and np.all(ab.sum(-1) <= 1 + slack)
+
+
+def _fresnel_T_np(cos_i, eta):
+    """Unpolarised Fresnel transmittance, `eta = n_i / n_t`, numpy float64 (independent)."""
+    sin_t = eta * np.sqrt(np.maximum(1 - cos_i**2, 0))
+    cos_t = np.sqrt(np.maximum(1 - sin_t**2, 0))
+    r_s = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    r_p = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    return 1 - (r_s**2 + r_p**2) / 2
+
+
+def flat_interface_irradiance(P, L, z_surface: float, eta: float, intensity: float = 1.0,
+                              sigma_t: float = 0.0, return_point: bool = False):
+    """Exact irradiance on a horizontal receiver at `P` under a flat interface `z = z_surface`.
+
+    Independent of the package's transport code (float64 numpy): with light height
+    `h = L_z - z_surface`, receiver depth `d = z_surface - P_z` and horizontal distance
+    `rho`, the ray leaving the light at angle `theta_a` from the vertical lands at
+    `rho(theta_a) = h tan(theta_a) + d tan(theta_w)`, `sin(theta_a) = eta sin(theta_w)`;
+    `theta_a` is found by bisection. The flux `I_e sin(theta_a) dtheta_a dphi` lands on the
+    horizontal area `rho drho dphi`, so `E = I_e T sin(theta_a) / (rho drho/dtheta_a)`,
+    with `drho/dtheta_a = h / cos^2(theta_a) + d cos(theta_a) / (eta cos^3(theta_w))` and
+    the exact Fresnel `T`; at `rho = 0` the limit `I_e T / (h + d/eta)^2`. With
+    `return_point`, also the refraction point `M` (on an unbounded interface: a mesh of
+    finite extent has no path where `M` lies outside it).
+    """
+    P, L = np.asarray(P, np.float64), np.broadcast_to(np.asarray(L, np.float64), np.shape(P))
+    h = L[..., 2] - z_surface
+    d = z_surface - P[..., 2]
+    rho = np.linalg.norm(P[..., :2] - L[..., :2], axis=-1)
+    lo, hi = np.zeros_like(rho), np.full_like(rho, np.pi / 2 * (1 - 1e-12))
+    for _ in range(200):
+        mid = (lo + hi) / 2
+        sin_w = np.sin(mid) / eta
+        r = h * np.tan(mid) + d * sin_w / np.sqrt(1 - sin_w**2)
+        lo, hi = np.where(r < rho, mid, lo), np.where(r < rho, hi, mid)
+    th_a = (lo + hi) / 2
+    cos_a = np.cos(th_a)
+    cos_w = np.sqrt(1 - (np.sin(th_a) / eta) ** 2)
+    drho = h / cos_a**2 + d * cos_a / (eta * cos_w**3)
+    T = _fresnel_T_np(cos_a, 1 / eta)
+    on_axis = rho <= 1e-12 * (h + d)
+    E = np.where(on_axis, T / (h + d / eta) ** 2,
+                 T * np.sin(th_a) / np.where(on_axis, 1, rho * drho))
+    E = intensity * E * np.exp(-sigma_t * d / cos_w)
+    if not return_point:
+        return E
+    u = (P[..., :2] - L[..., :2]) / np.where(on_axis, 1, rho)[..., None]
+    M_xy = L[..., :2] + (h * np.tan(th_a))[..., None] * u
+    return E, np.concatenate([M_xy, np.full(M_xy.shape[:-1] + (1,), z_surface)], -1)

@@ -1,0 +1,153 @@
+"""Caustic irradiance at a receiver from a solved path (seed 001 eq. 25, corrected per MATH.md §6).
+
+Seed 001 eq. 25 weights a path `P -> M -> L` by `I_e F A rho / D`. As irradiance at `P`
+(flux per unit receiver area) from a point light of intensity `I_e` (W/sr), the formula
+this module uses is
+
+    E(P) = eta^2 T(M) A(d_P) cos(theta_P) I_e / D
+
+- `D` the distance correction factor (eq. 26-33, `ray_differential_D`): the area on the
+  plane at `L` orthogonal to `w_L` per unit solid angle of directions leaving `P`.
+- `eta^2`: D is measured from the receiver's side (directions in water), while `I_e` is
+  per solid angle at the light (in air). Conservation of etendue across the interface,
+  `eta_in^2 dA_P dw_P = eta_out^2 dA_L dw_L`, turns `1/D` (solid angle at `P` per area
+  at `L`) into `eta^2 / D` (solid angle at `L` per area at `P`).
+- `T` the exact unpolarised Fresnel transmittance at `M` (the `F` of eq. 25), for light
+  arriving from the light's side at `cos = w_L . n_s` with index ratio `1 / eta`.
+- `cos(theta_P) = -w_P . n_P`: eq. 25 gives irradiance on a plane orthogonal to the ray;
+  a receiver with normal `n_P` catches `cos(theta_P)` of it (0 when it faces away).
+- `A = exp(-sigma_t d_P)` Beer-Lambert attenuation in the medium (1 by default).
+
+The paper's `rho` (BRDF) turns irradiance into reflected radiance and is left to the
+caller. The formula is established by experiment, not assumed: `photon_irradiance`
+(brute-force photon tracing) and the photon-differential irradiance agree with it
+(`docs/irradiance.md`, `experiments/irradiance_agreement.py`, `tests/transport/`).
+On a flat interface at normal incidence it reduces to MATH.md §6's paraxial
+`E = I_e T / (h + d/eta)^2` (light height `h`, receiver depth `d`).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from ..barycentric import barycentric_point
+from ..geometry import dot, fresnel_transmittance, norm, safe_normalize
+from ..mesh import SurfaceMesh
+from ..objectives import path_vectors
+from .differentials import _edge_coordinates, ray_differential_D
+
+
+@jax.jit
+def path_irradiance(
+    V: Float[Array, "*batch 3 3"],
+    N: Float[Array, "*batch 3 3"],
+    P: Float[Array, "*batch 3"],
+    L: Float[Array, "*batch 3"],
+    ab: Float[Array, "*batch 2"],
+    eta,
+    intensity,
+    receiver_normal: Float[Array, "*batch 3"],
+    sigma_t=0.0,
+) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
+    """Irradiance at `P` through refraction point `ab`: `eta^2 T A cos(theta_P) I_e / D`.
+
+    Seed 001 eq. 25 with the factors MATH.md §6 says it leaves out (module docstring).
+    `receiver_normal` is normalised here. Returns `(E, valid)`; `E = 0` where `valid` is
+    False (`ray_differential_D` invalid: TIR, grazing, degenerate) and where the receiver
+    faces away from the arriving light (there `valid` stays True: the irradiance is 0).
+    """
+    _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
+    dtype = w_P.dtype
+    eta = jnp.asarray(eta, dtype)
+    D, valid = ray_differential_D(V, N, P, L, ab, eta)
+    T = fresnel_transmittance(dot(w_L, n_s), 1 / eta)
+    cos_P = jnp.maximum(-dot(w_P, safe_normalize(jnp.asarray(receiver_normal, dtype))), 0)
+    A = jnp.exp(-jnp.asarray(sigma_t, dtype) * norm(P - barycentric_point(V, ab)))
+    ok = valid & (D > 0)
+    E = eta**2 * T * A * cos_P * jnp.asarray(intensity, dtype) / jnp.where(ok, D, 1)
+    return jnp.where(ok, E, 0), ok
+
+
+def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
+    n_P = np.asarray(receiver_normal, np.float64)
+    if n_P.shape[-1:] != (3,):
+        raise ValueError(f"receiver_normal must have shape (3,) or (N, 3), got {n_P.shape}")
+    try:
+        n_P = np.broadcast_to(n_P, (n, 3))
+    except ValueError as exc:
+        raise ValueError(f"receiver_normal {n_P.shape} does not broadcast to ({n}, 3)") from exc
+    length = np.linalg.norm(n_P, axis=-1)
+    if not np.all(np.isfinite(length)) or np.any(length == 0):
+        raise ValueError("receiver_normal must be finite and non-zero")
+    return n_P
+
+
+def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiver_normal,
+               method: str = "walk", sigma_t: float = 0.0, all_paths: bool = False,
+               return_solution: bool = False, **options):
+    """Caustic irradiance (W/m^2) at receivers `P` from a point light at `L` through the surface.
+
+    Args:
+        mesh: the refractive surface (normals outward, toward the light).
+        P: `(N, 3)` receivers inside the medium.
+        L: `(N, 3)` or `(3,)` light position (for a directional light, a far point).
+        intensity: the light's radiant intensity `I_e` (W/sr), scalar or `(N,)`.
+        eta: `eta_in / eta_out`.
+        receiver_normal: `(3,)` or `(N, 3)` receiver normals (normalised here).
+        method: the solver (`solve`'s `method`); `**options` go to it.
+        sigma_t: Beer-Lambert extinction coefficient of the medium (1/m), `A = exp(-sigma_t d_P)`.
+        all_paths: sum over every refracted path (needs `method="exhaustive"`, float64).
+            Past the focal distance several paths reach one receiver; a single-path
+            solver returns one of them, so only this sum is the total irradiance there.
+        return_solution: also return the solver's `Solution` (its `status` says why a
+            lane has no path: none exists, or the solver failed to find it).
+
+    Returns `(N,)` irradiance in the mesh's dtype, 0 where no path was found (and
+    `(E, Solution)` with `return_solution`). Per path: `path_irradiance` (module
+    docstring). Bad input raises `ValueError` before any solve.
+    """
+    from ..solvers import solve
+
+    intensity_np = np.asarray(intensity, np.float64)
+    if not np.all(np.isfinite(intensity_np)) or np.any(intensity_np < 0):
+        raise ValueError("intensity must be finite and >= 0")
+    if not np.isfinite(sigma_t) or sigma_t < 0:
+        raise ValueError(f"sigma_t must be finite and >= 0, got {sigma_t}")
+    if all_paths and method != "exhaustive":
+        raise ValueError("all_paths=True sums every solution: it needs method='exhaustive'")
+    P_np = np.asarray(P)
+    n = int(np.prod(P_np.shape[:-1])) if P_np.ndim > 1 else 1
+    n_P = _check_receiver_normal(receiver_normal, n)
+    if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
+        raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
+    dtype = mesh.dtype
+    if all_paths:
+        res = solve(mesh, P, L, eta=eta, method="exhaustive", return_all=True, **options)
+        E = _sum_all_paths(mesh, res, P, L, eta, intensity_np, n_P, sigma_t)
+        return (E, res.solution) if return_solution else E
+    sol = solve(mesh, P, L, eta=eta, method=method, **options)
+    V, N = mesh.triangle(sol.triangle)
+    P_b = jnp.broadcast_to(jnp.asarray(P, dtype).reshape(-1, 3), (n, 3))
+    L_b = jnp.broadcast_to(jnp.asarray(L, dtype).reshape(-1, 3), (n, 3))
+    E, _ = path_irradiance(V, N, P_b, L_b, sol.barycentric, eta, jnp.asarray(intensity_np, dtype),
+                           jnp.asarray(n_P, dtype), sigma_t)
+    E = jnp.where(sol.found, E, 0)
+    return (E, sol) if return_solution else E
+
+
+def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t):
+    """Sum `path_irradiance` over every solution of an `ExhaustiveSolution` (float64)."""
+    pts, tris, count = np.asarray(res.all_points), np.asarray(res.all_triangles), np.asarray(res.count)
+    n, width = tris.shape
+    V, N = mesh.triangle(jnp.asarray(tris))
+    E1, E2 = V[..., 1, :] - V[..., 0, :], V[..., 2, :] - V[..., 0, :]
+    ab = _edge_coordinates(E1, E2, jnp.asarray(pts) - V[..., 0, :])
+    P_b = jnp.broadcast_to(jnp.asarray(P, mesh.dtype).reshape(-1, 1, 3), (n, width, 3))
+    L_b = jnp.broadcast_to(jnp.asarray(L, mesh.dtype).reshape(-1, 1, 3), (n, width, 3))
+    I_b = jnp.broadcast_to(jnp.asarray(intensity, mesh.dtype).reshape(-1, 1), (n, width))
+    E, _ = path_irradiance(V, N, P_b, L_b, ab, eta, I_b, jnp.asarray(n_P)[:, None, :], sigma_t)
+    used = np.arange(width)[None] < count[:, None]
+    return jnp.sum(jnp.where(jnp.asarray(used), E, 0), axis=1)
