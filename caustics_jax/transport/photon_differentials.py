@@ -265,7 +265,7 @@ def _splat(xy, flux, cov, origin, cell, window, nx, ny):
 
 
 def splat_footprints(xy, flux, J, du: float, dv: float, receiver: ReceiverGrid, *,
-                     kappa: float = 0.7, window: int = 4) -> np.ndarray:
+                     kappa: float = 0.7, window: int = 6) -> np.ndarray:
     """Irradiance map from photons splatted as anisotropic Gaussians (seed 003 footprints).
 
     Photon `i` at `xy[i]` (receiver-plane x, y) with flux `flux[i]` and texel Jacobian
@@ -274,8 +274,10 @@ def splat_footprints(xy, flux, J, du: float, dv: float, receiver: ReceiverGrid, 
     `(2 window + 1)^2` block of cells, normalised so that it deposits exactly its flux
     (flux leaving the grid is lost, as it should be). `kappa = 0.7` texel keeps the sum of
     kernels on a regular texel lattice flat to ~1e-4 (Poisson summation:
-    `2 exp(-2 pi^2 kappa^2)`); the cell term keeps a footprint smaller than a cell from
-    aliasing. The receiver plane must be horizontal (`J` in x, y coordinates).
+    `2 exp(-2 pi^2 kappa^2)`; measured 1.2e-4 on a lattice of 1.46 cells, 0.32 with
+    `kappa = 0.3`); the cell term keeps a footprint smaller than a cell from aliasing. A
+    footprint wider than about `window / 3` cells is truncated (still flux conserving,
+    but blurred less than asked). The receiver plane must be horizontal (`J` in x, y).
     Returns `(ny, nx)` irradiance (W/m^2).
     """
     receiver = ReceiverGrid(*receiver)
