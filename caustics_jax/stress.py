@@ -241,3 +241,23 @@ def stress_case(category: str, n: int = 256, seed: int = 0) -> StressCase:
 def stress_cases(n: int = 256, seed: int = 0, categories=CATEGORIES) -> dict[str, StressCase]:
     """Every category (or those named), `n` paths each."""
     return {c: stress_case(c, n, seed) for c in categories}
+
+
+def refraction_rounding_bound(mesh, face, ab, P, eta: float, dtype) -> np.ndarray:
+    """First-order rounding bound (rad) of `refract(-w_P, -n_s, eta)` in `dtype` at `(face, ab)`.
+
+    In GLSL `refract` (MATH.md §1) `k = 1 - eta^2 (1 - c^2)`, `c = w_P . n_s`; a rounding
+    `dc ~ eps` of `c` moves `k` by `2 eta^2 c dc` and `sqrt(k)` by `eta^2 c dc / sqrt(k)`,
+    so the refracted direction (and the signed sine `f`) carries an error of about
+    `eta^2 eps / sqrt(k)` that no solver can remove. It exceeds the float32 acceptance
+    tolerance (1e-5) within about 2e-4 of `k = 0`, i.e. near the critical angle.
+    `mesh` needs numpy-readable `vertices`, `faces`, `normals`; float64 evaluation.
+    """
+    V = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)[face]]
+    N = np.asarray(mesh.normals, np.float64)[np.asarray(mesh.faces)[face]]
+    a, b = ab[:, :1], ab[:, 1:]
+    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
+    n_s = _unit(N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0]))
+    c = np.sum(_unit(np.asarray(P, np.float64) - M) * n_s, -1)
+    k = 1 - eta**2 * (1 - c**2)
+    return eta**2 * float(np.finfo(dtype).eps) / np.sqrt(np.maximum(k, np.finfo(np.float64).tiny))

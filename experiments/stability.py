@@ -197,9 +197,17 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
                 angle[found] = refraction_angle_error(seen, tri[found], ab[found], P64[found], L64[found], case.eta)
                 residual = np.asarray(sol.residual, np.float64)
                 silent = found & ((np.abs(residual) > tol) | (angle > SILENT_ANGLE_FACTOR * tol))
+                # beyond what refract's own rounding near the critical angle explains
+                bound = np.zeros(len(found))
+                bound[found] = stress.refraction_rounding_bound(seen, tri[found], ab[found], P64[found],
+                                                                case.eta, dtype)
+                beyond = silent & ((np.abs(residual) > tol) | (angle > SILENT_ANGLE_FACTOR * (tol + bound)))
                 bad = _nonfinite(sol.point, sol.barycentric, sol.residual, sol.start_point)
                 row[name] = {
                     "n": int(len(found)), "found": int(found.sum()), "silent": int(silent.sum()),
+                    "silent_beyond_rounding_bound": int(beyond.sum()),
+                    "silent_angle_rad": angle[silent].tolist()[:20],
+                    "silent_rounding_bound_rad": bound[silent].tolist()[:20],
                     "silent_lanes": np.nonzero(silent)[0].tolist()[:20],
                     "nonfinite": int(bad.sum()), "status": sol.summary(), "tol": tol,
                     "angle_error_rad": _stats(angle[found]),
@@ -234,9 +242,10 @@ def totals(result) -> dict:
                 out.setdefault(key, {"nonfinite": 0, "silent": 0})["nonfinite"] += k["nonfinite"]
             for name, s in r["solvers"][dtype].items():
                 key = (dtype, name)
-                out.setdefault(key, {"nonfinite": 0, "silent": 0})
+                out.setdefault(key, {"nonfinite": 0, "silent": 0, "silent_beyond_rounding_bound": 0})
                 out[key]["nonfinite"] += s["nonfinite"]
                 out[key]["silent"] += s["silent"]
+                out[key]["silent_beyond_rounding_bound"] += s["silent_beyond_rounding_bound"]
     return {f"{d}/{n}": v for (d, n), v in out.items()}
 
 
@@ -262,7 +271,8 @@ def table(result) -> str:
             for name in ("walk", "newton"):
                 v = s[name]
                 amax = v["angle_error_rad"]["max"]
-                cells += [f"{v['found']}/{v['n']}", str(v["silent"]), str(v["nonfinite"]), _short(v["status"]),
+                silent = str(v["silent"]) + (f" ({v['silent_beyond_rounding_bound']} beyond)" if v["silent"] else "")
+                cells += [f"{v['found']}/{v['n']}", silent, str(v["nonfinite"]), _short(v["status"]),
                           f"{amax:.1e}" if amax is not None else "-"]
             if "exhaustive" in s:
                 v = s["exhaustive"]

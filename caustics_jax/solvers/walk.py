@@ -90,6 +90,7 @@ class _State(NamedTuple):
     ab_lo: jax.Array  # bracket ends as points (for the chord fallback)
     ab_hi: jax.Array
     side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
+    tir_end: jax.Array  # TIR search: which bracket end is totally reflecting (-1 lo, +1 hi, 0 none)
     best_ab: jax.Array
     best_f: jax.Array
     steps: jax.Array
@@ -319,7 +320,8 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
             mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
             exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
             anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
-            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32), best_ab=ab0,
+            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32), tir_end=jnp.asarray(0, jnp.int32),
+            best_ab=ab0,
             best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
         )
 
@@ -347,12 +349,17 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     found_x = ok & x_ok & (jnp.abs(fx) <= tol)
     bracket = ok & e_ok & x_ok & _root_between((f_e, g2[0]), (fx, g2[1]))
     lost = ~ok | (side == 0)
-    # Walking out of the region where light from P can leave into total internal
-    # reflection: no root ahead on this branch. (Inside it, keep walking: f is undefined.)
-    tir = e_ok & (stx == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
+    # An arc from a transmitting point to a totally reflecting one (or back) may hold a
+    # root between the transmitting end and the onset of TIR, where neither end shows a
+    # sign change (grazing light: the solution lies within 1e-5 m of the onset). Search
+    # it towards the onset (`_bisect_update`) as the exhaustive reference does. Without a
+    # root there, a walk into TIR ends (no root ahead on this branch); a walk out of it
+    # goes on (inside TIR f is undefined).
+    TIR = ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+    tir_end = jnp.where(ok & e_ok & (stx == TIR), 1, jnp.where(ok & (st_e == TIR) & x_ok, -1, 0))
 
-    status, mode = s.status, jnp.where(bracket, BISECT, WALK)
-    for cond, code in ((tir, Status.TOTAL_INTERNAL_REFLECTION), (lost, Status.LOST_CURVE),
+    status, mode = s.status, jnp.where(bracket | (tir_end != 0), BISECT, WALK)
+    for cond, code in ((lost, Status.LOST_CURVE),
                        (found_x, Status.FOUND), (found_e, Status.FOUND), (left, Status.LEFT_MESH)):
         mode = jnp.where(cond, DONE, mode)
         status = jnp.where(cond, code, status)
@@ -365,7 +372,7 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face,
         exit_k=k, exit_t=tt, exit_ab=ab, f_exit=fx, anchor=e, tau=tau, perp=perp,
         phi_lo=jnp.zeros_like(phi), phi_hi=phi, f_lo=f_e, f_hi=fx, ab_lo=e, ab_hi=ab,
-        side=jnp.zeros_like(s.side),
+        side=jnp.zeros_like(s.side), tir_end=tir_end.astype(jnp.int32),
         best_ab=best_ab, best_f=best_f, steps=s.steps + 1, crossed=s.crossed + jnp.where(left, 0, 1),
     )
 
@@ -399,6 +406,7 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
     if illinois:
         frac = -s.f_lo / jnp.where(denom != 0, denom, 1)  # false position, from the lo end
         lam = jnp.where(denom != 0, jnp.clip(frac, 1e-6, 1 - 1e-6), 0.5)
+        lam = jnp.where(s.tir_end != 0, 0.5, lam)  # f is 0 at a TIR end: no false position
     phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
     p_pencil, ok_pencil = _pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
@@ -413,8 +421,19 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
 
 
 def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _State:
-    ok = ok & (stm == ObjectiveStatus.OK)
+    transmits = stm == ObjectiveStatus.OK
+    searching = s.tir_end != 0
+    tir_mid = searching & (stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
+    ok = ok & (transmits | tir_mid)
     to_hi = _opposite(fm, s.f_lo)  # the root lies between lo and p: p becomes the new hi
+    # TIR search (`_walk_update`): p replaces the TIR end when it reflects too, or when f
+    # changed sign against the transmitting end (then [that end, p] is a plain bracket);
+    # otherwise p replaces the transmitting end, closing in on the onset of TIR.
+    f_ok_end = jnp.where(s.tir_end > 0, s.f_lo, s.f_hi)
+    flipped = transmits & _opposite(fm, f_ok_end)
+    replace_tir_end = tir_mid | flipped
+    to_hi = jnp.where(searching, jnp.where(s.tir_end > 0, replace_tir_end, ~replace_tir_end), to_hi)
+    tir_end = jnp.where(flipped, 0, s.tir_end)
     phi_lo = jnp.where(to_hi, s.phi_lo, phi)
     phi_hi = jnp.where(to_hi, phi, s.phi_hi)
     ab_lo = jnp.where(to_hi, s.ab_lo, p)
@@ -422,25 +441,30 @@ def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _Stat
     f_lo = jnp.where(to_hi, s.f_lo, fm)
     f_hi = jnp.where(to_hi, fm, s.f_hi)
     if illinois:  # halve the stale end's value when the same end is kept twice
-        side = jnp.where(to_hi, 1, -1)
+        side = jnp.where(searching, 0, jnp.where(to_hi, 1, -1))
         f_lo = jnp.where(to_hi & (s.side == 1), f_lo / 2, f_lo)
         f_hi = jnp.where(~to_hi & (s.side == -1), f_hi / 2, f_hi)
     else:
         side = s.side
-    found = ok & (jnp.abs(fm) <= tol)
+    found = ok & transmits & (jnp.abs(fm) <= tol)
     eps = jnp.finfo(p.dtype).eps
     stalled = (jnp.linalg.norm(ab_hi - ab_lo) <= 4 * eps * jnp.maximum(jnp.linalg.norm(ab_hi), 1)) | (
         jnp.abs(phi_hi - phi_lo) <= 4 * eps * jnp.maximum(jnp.abs(phi_hi), 1e-30))
     mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
     status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
-    better = ok & (jnp.abs(fm) < jnp.abs(s.best_f))
+    # A TIR search that closed in on the onset without a sign change found no root: a walk
+    # into TIR ends there, a walk out of it goes on from the arc's exit.
+    no_root = stalled & ~found & (tir_end != 0)
+    mode = jnp.where(no_root, jnp.where(tir_end > 0, DONE, WALK), mode)
+    status = jnp.where(no_root, jnp.where(tir_end > 0, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
+    better = ok & transmits & (jnp.abs(fm) < jnp.abs(s.best_f))
     keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
     return s._replace(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32),
         phi_lo=keep(phi_lo, s.phi_lo), phi_hi=keep(phi_hi, s.phi_hi),
         f_lo=keep(f_lo, s.f_lo), f_hi=keep(f_hi, s.f_hi),
         ab_lo=keep(ab_lo, s.ab_lo), ab_hi=keep(ab_hi, s.ab_hi),
-        side=jnp.asarray(side, jnp.int32),
+        side=jnp.asarray(side, jnp.int32), tir_end=keep(tir_end, s.tir_end).astype(jnp.int32),
         best_ab=jnp.where(better | found, p, s.best_ab), best_f=jnp.where(better | found, fm, s.best_f),
         steps=s.steps + 1,
     )
