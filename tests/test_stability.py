@@ -129,3 +129,17 @@ def test_walk_finds_roots_next_to_the_onset_of_total_internal_reflection(dtype):
     crossing = np.asarray(sol.status) != Status.NO_CROSSING
     assert crossing.sum() >= 48
     assert np.asarray(sol.found)[crossing].mean() >= 0.95, sol.summary()
+
+
+def test_walk_searches_the_first_arc_when_it_runs_into_total_internal_reflection():
+    # P 1e-9-1e-6 m below the surface: the root lies within 1e-8 m of M0 and the rest of
+    # the first triangle is totally reflecting (w_P nearly horizontal there). The walk used
+    # to walk off through TIR and leave the mesh on all 64 lanes; searching the first arc
+    # towards the onset brackets the root: 8 lanes FOUND, 27 NOT_CONVERGED (f's rounding,
+    # eps |M| / |P - M| ~ 1e-6, is above tol = 1e-10 there), 29 LEFT_MESH (float64).
+    case = _case("p_near_surface")
+    with cj.precision("float64"):
+        sol = cj.solve(case.mesh("float64"), case.P, case.L, method="walk")
+    status = np.asarray(sol.status)
+    assert (status == Status.FOUND).sum() >= 4, sol.summary()
+    assert (status != Status.LEFT_MESH).sum() >= 24, sol.summary()

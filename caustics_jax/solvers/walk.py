@@ -90,7 +90,7 @@ class _State(NamedTuple):
     ab_lo: jax.Array  # bracket ends as points (for the chord fallback)
     ab_hi: jax.Array
     side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
-    tir_end: jax.Array  # TIR search: which bracket end is totally reflecting (-1 lo, +1 hi, 0 none)
+    tir_end: jax.Array  # TIR search: which bracket end is totally reflecting (-1 lo, +1 or 2 hi, 0 none)
     best_ab: jax.Array
     best_f: jax.Array
     steps: jax.Array
@@ -279,14 +279,22 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     def build(walk_m):
         is_ellipse = ~okp & ~okm
         bracket = jnp.where(is_ellipse, ellipse_bracket, br_p | br_m)
-        tau = jnp.where(is_ellipse, tau_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), taum, taup))
-        perp = jnp.where(is_ellipse, perp_e, jnp.where(use_m_bracket | (~(br_p | br_m) & walk_m), perpm, perpp))
-        phi_lo = jnp.where(is_ellipse, phis_all[j], jnp.where(use_m_bracket, phism, phisp))
-        phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m_bracket, phim, phip))
-        f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m_bracket, fsm, fsp))
-        f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m_bracket, fm, fp))
-        ab_lo = jnp.where(is_ellipse, pts[j], jnp.where(use_m_bracket, nearm, nearp))
-        ab_hi = jnp.where(is_ellipse, pts[j + 1], jnp.where(use_m_bracket, abm, abp))
+        use_m = use_m_bracket | (~(br_p | br_m) & walk_m)
+        # No sign change, and the arc of the walk direction runs into TIR: search it
+        # towards the onset first (`_bisect_update`; P within 1e-6 m of the surface puts
+        # the root 1e-9 m from M0 and the rest of the triangle in TIR). Without a root
+        # there the walk goes on as before (tir_end = 2).
+        tir_arc = jnp.where(walk_m, okm & (st_all[4] == OK) & (stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION),
+                            okp & (st_all[3] == OK) & (stp == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION))
+        search = ~is_ellipse & ~(br_p | br_m) & tir_arc
+        tau = jnp.where(is_ellipse, tau_e, jnp.where(use_m, taum, taup))
+        perp = jnp.where(is_ellipse, perp_e, jnp.where(use_m, perpm, perpp))
+        phi_lo = jnp.where(is_ellipse, phis_all[j], jnp.where(use_m, phism, phisp))
+        phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m, phim, phip))
+        f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m, fsm, fsp))
+        f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m, fm, fp))
+        ab_lo = jnp.where(is_ellipse, pts[j], jnp.where(use_m, nearm, nearp))
+        ab_hi = jnp.where(is_ellipse, pts[j + 1], jnp.where(use_m, abm, abp))
 
         pick_m = walk_m
         exit_k = jnp.where(pick_m, km, kp)
@@ -296,7 +304,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
         st_exit = jnp.where(pick_m, stm, stp)
 
         status = jnp.asarray(Status.FOUND, jnp.int32)
-        mode = jnp.where(bracket, BISECT, WALK)
+        mode = jnp.where(bracket | search, BISECT, WALK)
         # A walk may start inside total internal reflection (M0 beyond the critical angle):
         # it walks on until f is defined again, so only a degenerate exit stops it here.
         mode = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), DONE, mode)
@@ -315,12 +323,14 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
         mode = jnp.where(found, mode, DONE)
         status = jnp.where(found, status, Status.NO_CROSSING)
 
-        can_flip = (mode == WALK) & okp & okm
+        searching = search & (mode == BISECT)
+        can_flip = ((mode == WALK) | searching) & okp & okm
         return can_flip, _State(
             mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
             exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
             anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
-            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32), tir_end=jnp.asarray(0, jnp.int32),
+            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32),
+            tir_end=jnp.where(searching, 2, 0).astype(jnp.int32),
             best_ab=ab0,
             best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
         )
@@ -453,10 +463,11 @@ def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _Stat
     mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
     status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
     # A TIR search that closed in on the onset without a sign change found no root: a walk
-    # into TIR ends there, a walk out of it goes on from the arc's exit.
+    # into TIR ends there (tir_end 1), a walk out of it (-1) or out of the first triangle
+    # (2) goes on from the arc's exit.
     no_root = stalled & ~found & (tir_end != 0)
-    mode = jnp.where(no_root, jnp.where(tir_end > 0, DONE, WALK), mode)
-    status = jnp.where(no_root, jnp.where(tir_end > 0, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
+    mode = jnp.where(no_root, jnp.where(tir_end == 1, DONE, WALK), mode)
+    status = jnp.where(no_root, jnp.where(tir_end == 1, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
     better = ok & transmits & (jnp.abs(fm) < jnp.abs(s.best_f))
     keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
     return s._replace(
