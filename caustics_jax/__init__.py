@@ -6,6 +6,7 @@ the package: use `precision("float64")` or `enable_x64()`.
 
 from . import scenes
 from ._precision import enable_x64, precision
+from .features import SceneFeatures, features
 from .barycentric import barycentric_point, edge_barycentric, interpolated_normal
 from .conic import (
     conic_coefficients,
@@ -50,6 +51,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ReceiverGrid",
+    "SceneFeatures",
     "Solution",
     "Status",
     "SurfaceMesh",
@@ -70,6 +72,7 @@ __all__ = [
     "edge_barycentric",
     "edge_intersections",
     "enable_x64",
+    "features",
     "fresnel_reflectance",
     "fresnel_transmittance",
     "half_vector_residual",

@@ -12,6 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..barycentric import barycentric_point
+from ..features import GENERAL, SceneFeatures
+from ..features import check as check_features
+from ..features import resolve as resolve_features
 from ..mesh import SurfaceMesh
 from ..start_points import start_points
 from ._solution import Solution, Status
@@ -161,7 +164,7 @@ def _walk_options(**options) -> WalkOptions:
 
 
 def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", start=None,
-          **options) -> Solution:
+          features="auto", **options) -> Solution:
     """Find refraction points `M` of paths `P -> M -> L` through the surface (seed 001 §3.4).
 
     Args:
@@ -172,6 +175,14 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
         method: "walk" (seed 001 curve walk), "newton" (optimistix baselines) or
             "exhaustive" (all solutions, reference).
         start: optional precomputed `start_points(mesh, P, L)` result.
+        features: `"auto"` (default: `caustics_jax.features(mesh)`), `None` (always the
+            general path) or a `SceneFeatures` from `features(mesh)`. Walk and Newton
+            (`n_starts=1`) skip what the scene does not need: lanes whose segment cannot
+            reach the surface skip the start-point search, lanes without a start point
+            skip the solver (`NO_CROSSING`), and on a flat surface the walk's points come
+            in closed form (`solvers/flat.py`). Same statuses and points as `None`
+            (docs/features.md); `iterations` and `crossed` of closed-form lanes count the
+            root solve's halvings and no crossings. Ignored by "exhaustive".
         **options: per method; "walk": `tol`, `max_steps`, `bracket`, `ellipse_samples`
             (`WalkOptions`); "newton": `solver`, `constraint`, `tol`, `inner_steps`,
             `max_patches`, `n_starts`, `seed` (`NewtonOptions`); "exhaustive": `samples`,
@@ -185,6 +196,7 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
     before any jitted work.
     """
     P, L, eta = _validate(mesh, P, L, eta, method)
+    check_features(features)
     if method == "exhaustive":
         from .exhaustive import OPTIONS, solve_exhaustive
 
@@ -193,6 +205,10 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
             raise ValueError(f"unknown exhaustive option(s) {unknown}; known: {OPTIONS}")
         return solve_exhaustive(mesh, P, L, eta, start=start, **options)
     opts = _walk_options(**options) if method == "walk" else newton_options(mesh.dtype, **options)
+    feats = resolve_features(features, mesh)
+    if feats is not None and feats != GENERAL and not (method == "newton" and opts.n_starts > 1):
+        # (Newton's extra random starts are drawn per lane position: compaction would move them.)
+        return _solve_specialised(mesh, P, L, eta, method, start, opts, feats)
     n = P.shape[0]
     start = start if start is not None else start_points(mesh, P, L)
     P, L, start = _pad_lanes(P, L, start)
@@ -205,3 +221,87 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
     else:
         sol = solve_newton(mesh, P, L, eta, start, opts)
     return jax.tree.map(lambda x: x[:n], sol)
+
+
+# --------------------------------------------------------------------------- specialised path
+# (`features`, DESIGN.md "Skipping what a scene does not need"; docs/features.md)
+
+
+def compact_index(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gather indices for the lanes `idx`, padded to `lane_bucket(len(idx))` with copies of
+    `idx[0]` (one compile per size class), and the mask of the real ones."""
+    k = idx.size
+    g = np.concatenate([idx, np.full(lane_bucket(k) - k, idx[0], idx.dtype)])
+    return g, np.arange(g.size) < k
+
+
+def scatter_lanes(base, g: np.ndarray, keep: np.ndarray, sub):
+    """`base` with lanes `g[keep]` replaced by the matching lanes of `sub` (pytrees)."""
+    n = jax.tree.leaves(base)[0].shape[0]
+    target = jnp.asarray(np.where(keep, g, n))  # n is out of bounds: dropped
+    return jax.tree.map(lambda b, s: b.at[target].set(s.astype(b.dtype), mode="drop"), base, sub)
+
+
+def _no_crossing(n: int, dtype) -> Solution:
+    """What every solver returns for a lane without a start point (walk `_first_triangle`,
+    Newton `_newton_lane`): `NO_CROSSING`, zeros, triangle -1, no iterations."""
+    return Solution(
+        point=jnp.zeros((n, 3), dtype), triangle=jnp.full(n, -1, jnp.int32),
+        barycentric=jnp.zeros((n, 2), dtype), found=jnp.zeros(n, bool),
+        status=jnp.full(n, Status.NO_CROSSING, jnp.int32), iterations=jnp.zeros(n, jnp.int32),
+        residual=jnp.zeros(n, dtype), crossed=jnp.zeros(n, jnp.int32),
+        start_point=jnp.zeros((n, 3), dtype),
+    )
+
+
+def _compacted_start_points(mesh: SurfaceMesh, P, L):
+    """`start_points` for the lanes whose segment's bounding box meets the mesh's; the rest
+    (receiver and light both above the water, or both beside the pool) cannot cross."""
+    n = P.shape[0]
+    V = np.asarray(mesh.vertices, np.float64)
+    lo, hi = V.min(0), V.max(0)
+    pad = 1e-4 * float(np.max(hi - lo) + np.max(np.abs(V)) + 1)  # conservative: rounding never drops a crossing
+    P_np, L_np = np.asarray(P, np.float64), np.asarray(L, np.float64)
+    meets = np.all((np.maximum(P_np, L_np) >= lo - pad) & (np.minimum(P_np, L_np) <= hi + pad), -1)
+    base = (jnp.full(n, -1, jnp.int32), jnp.zeros((n, 2), mesh.dtype), jnp.zeros(n, bool))
+    idx = np.flatnonzero(meets)
+    if idx.size == 0:
+        return base
+    g, real = compact_index(idx)
+    sub = start_points(mesh, P[g], L[g])
+    return scatter_lanes(base, g, real, (sub.face, sub.barycentric, sub.found))
+
+
+def _solve_specialised(mesh, P, L, eta, method, start, opts, feats: SceneFeatures) -> Solution:
+    """`solve` for `features`: closed form where the scene allows it, the solver on the
+    compacted remaining lanes, results scattered back (docs/features.md)."""
+    from .flat import flat_root, flat_solution
+
+    n, dtype = P.shape[0], mesh.dtype
+    if start is None:
+        start = _compacted_start_points(mesh, P, L) if feats.compact_lanes else start_points(mesh, P, L)
+    face, ab0, found = (jnp.asarray(x) for x in start)
+    found_np = np.asarray(found)
+    tol = opts.tol if opts.tol is not None else default_tol(dtype)
+    sol = _no_crossing(n, dtype)
+    need = found_np.copy() if feats.compact_lanes else np.ones(n, bool)
+    if feats.flat and method == "walk" and found_np.any():
+        g, real = compact_index(np.flatnonzero(found_np))
+        P_g, L_g = P[g], L[g]
+        _, below, above, usable = flat_root(mesh, P_g, L_g, eta)
+        located = start_points(mesh, below, above)
+        flat_sol, good = flat_solution(mesh, P_g, L_g, eta, tol, usable, tuple(located), face[g], ab0[g])
+        keep = real & np.asarray(good)
+        sol = scatter_lanes(sol, g, keep, flat_sol)
+        need[g[keep]] = False
+    if not need.any():
+        return sol
+    g, real = compact_index(np.flatnonzero(need))
+    found_g = found[g] & jnp.asarray(real)
+    if method == "walk":
+        static = opts._replace(tol=None, max_steps=0)
+        sub = _walk_batch(bucketed(mesh), P[g], L[g], face[g], ab0[g], found_g, eta, tol,
+                          jnp.int32(opts.max_steps), static)
+    else:
+        sub = solve_newton(mesh, P[g], L[g], eta, (face[g], ab0[g], found_g), opts)
+    return scatter_lanes(sol, g, real, sub)

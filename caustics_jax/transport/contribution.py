@@ -87,7 +87,7 @@ def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
 
 def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiver_normal,
                method: str = "walk", sigma_t: float = 0.0, all_paths: bool = False,
-               return_solution: bool = False, **options):
+               return_solution: bool = False, features="auto", **options):
     """Caustic irradiance (W/m^2) at receivers `P` from a point light at `L` through the surface.
 
     Args:
@@ -104,11 +104,17 @@ def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiv
             solver returns one of them, so only this sum is the total irradiance there.
         return_solution: also return the solver's `Solution` (its `status` says why a
             lane has no path: none exists, or the solver failed to find it).
+        features: `"auto"` (default), `None` (the general path) or a `SceneFeatures`:
+            passed to `solve`, and with `compact_lanes` the D factor and the rest of
+            `path_irradiance` run only on the found lanes (docs/features.md). Ignored
+            with `all_paths`.
 
     Returns `(N,)` irradiance in the mesh's dtype, 0 where no path was found (and
     `(E, Solution)` with `return_solution`). Per path: `path_irradiance` (module
     docstring). Bad input raises `ValueError` before any solve.
     """
+    from ..features import check as check_features
+    from ..features import resolve as resolve_features
     from ..solvers import solve
 
     intensity_np = np.asarray(intensity, np.float64)
@@ -116,6 +122,7 @@ def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiv
         raise ValueError("intensity must be finite and >= 0")
     if not np.isfinite(sigma_t) or sigma_t < 0:
         raise ValueError(f"sigma_t must be finite and >= 0, got {sigma_t}")
+    check_features(features)
     if all_paths and method != "exhaustive":
         raise ValueError("all_paths=True sums every solution: it needs method='exhaustive'")
     P_np = np.asarray(P)
@@ -128,14 +135,36 @@ def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiv
         res = solve(mesh, P, L, eta=eta, method="exhaustive", return_all=True, **options)
         E = _sum_all_paths(mesh, res, P, L, eta, intensity_np, n_P, sigma_t)
         return (E, res.solution) if return_solution else E
-    sol = solve(mesh, P, L, eta=eta, method=method, **options)
-    V, N = mesh.triangle(sol.triangle)
+    feats = resolve_features(features, mesh)
+    sol = solve(mesh, P, L, eta=eta, method=method, features=feats, **options)
     P_b = jnp.broadcast_to(jnp.asarray(P, dtype).reshape(-1, 3), (n, 3))
     L_b = jnp.broadcast_to(jnp.asarray(L, dtype).reshape(-1, 3), (n, 3))
+    if feats is not None and feats.compact_lanes:
+        E = _found_lanes_irradiance(mesh, sol, P_b, L_b, eta, intensity_np, n_P, sigma_t)
+        return (E, sol) if return_solution else E
+    V, N = mesh.triangle(sol.triangle)
     E, _ = path_irradiance(V, N, P_b, L_b, sol.barycentric, eta, jnp.asarray(intensity_np, dtype),
                            jnp.asarray(n_P, dtype), sigma_t)
     E = jnp.where(sol.found, E, 0)
     return (E, sol) if return_solution else E
+
+
+def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
+    """`path_irradiance` (D factor included) on the found lanes only, compacted, then
+    scattered into zeros: the general path's `where(found, E, 0)` without the work."""
+    from ..solvers._solve import compact_index, scatter_lanes
+
+    n, dtype = P.shape[0], mesh.dtype
+    E = jnp.zeros(n, dtype)
+    idx = np.flatnonzero(np.asarray(sol.found))
+    if idx.size == 0:
+        return E
+    g, real = compact_index(idx)
+    V, N = mesh.triangle(sol.triangle[g])
+    I_e = np.broadcast_to(intensity, (n,))[g]
+    E_g, _ = path_irradiance(V, N, P[g], L[g], sol.barycentric[g], eta, jnp.asarray(I_e, dtype),
+                             jnp.asarray(n_P[g], dtype), sigma_t)
+    return scatter_lanes(E, g, real, E_g)
 
 
 def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t):
