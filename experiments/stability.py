@@ -24,6 +24,7 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import pathlib
 import sys
@@ -52,6 +53,8 @@ KERNELS = ("refract", "fresnel", "conic_coefficients", "conic_tangent", "edge_in
 # The Newton configuration compare.py ranks best on the default pool (docs/solvers.md).
 SOLVERS = {"walk": ("walk", {}), "newton": CONFIGS["newton-hv"], "exhaustive": ("exhaustive", {})}
 SILENT_ANGLE_FACTOR = 10.0
+# The general solver path, not a scene-feature specialisation (issue 7 part 2, where present).
+GENERAL = {"features": None} if "features" in inspect.signature(cj.solve).parameters else {}
 
 
 def _log(msg):
@@ -188,7 +191,8 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
                     lanes = slice(0, n_exhaustive)
                     tol = 1e-9  # the exhaustive reference's acceptance (docs/solvers.md)
                 t0 = time.perf_counter()
-                sol = jax.block_until_ready(cj.solve(mesh, P[lanes], L[lanes], method=method, **opts))
+                sol = jax.block_until_ready(cj.solve(mesh, P[lanes], L[lanes], method=method, **opts,
+                                                          **(GENERAL if method != "exhaustive" else {})))
                 seconds = time.perf_counter() - t0
                 found = np.asarray(sol.found)
                 tri, ab = np.asarray(sol.triangle), np.asarray(sol.barycentric, np.float64)

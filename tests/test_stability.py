@@ -8,6 +8,7 @@ dtype serves every category.
 """
 
 import functools
+import inspect
 
 import jax
 import jax.numpy as jnp
@@ -29,6 +30,10 @@ N = 64
 # measured angle <= tol + 1.3 bound (near_tir, float32 walk, 256 lanes; every other
 # category within 1.0x tol); 10x either flags a wrong point.
 SILENT_FACTOR = 10.0
+
+
+# The general solver path, not a scene-feature specialisation (issue 7 part 2, where present).
+GENERAL = {"features": None} if "features" in inspect.signature(cj.solve).parameters else {}
 
 
 @functools.cache
@@ -68,7 +73,7 @@ def test_solvers_on_adversarial_paths_report_no_nan_and_no_silent_failure(method
             case = _case(category)
             mesh = case.mesh(dtype)
             P, L = np.asarray(case.P, dtype), np.asarray(case.L, dtype)
-            sol = cj.solve(mesh, P, L, method=method)
+            sol = cj.solve(mesh, P, L, method=method, **GENERAL)
             silent = _silent_and_nonfinite(case, mesh, P, L, sol, default_tol(dtype))
             assert silent.size == 0, (category, silent, sol.summary())
 
@@ -110,7 +115,7 @@ def test_walk_accepts_m0_where_the_conic_is_singular_at_the_solution(dtype):
         sc = scenes.flat_pool(2048, n_receivers=8, dtype=dtype)
         P = np.asarray(sc.receivers)
         L = P + np.asarray([0.0, 0.0, 3.0], dtype)
-        sol = cj.solve(sc.surface, P, L, method="walk")
+        sol = cj.solve(sc.surface, P, L, method="walk", **GENERAL)
     assert np.all(np.asarray(sol.found)), sol.summary()
     np.testing.assert_allclose(np.asarray(sol.point)[:, :2], P[:, :2], atol=1e-6)
 
@@ -125,7 +130,7 @@ def test_walk_finds_roots_next_to_the_onset_of_total_internal_reflection(dtype):
     with cj.precision(dtype):
         mesh = case.mesh(dtype)
         P, L = np.asarray(case.P, dtype), np.asarray(case.L, dtype)
-        sol = cj.solve(mesh, P, L, method="walk")
+        sol = cj.solve(mesh, P, L, method="walk", **GENERAL)
     crossing = np.asarray(sol.status) != Status.NO_CROSSING
     assert crossing.sum() >= 48
     assert np.asarray(sol.found)[crossing].mean() >= 0.95, sol.summary()
@@ -139,7 +144,23 @@ def test_walk_searches_the_first_arc_when_it_runs_into_total_internal_reflection
     # eps |M| / |P - M| ~ 1e-6, is above tol = 1e-10 there), 29 LEFT_MESH (float64).
     case = _case("p_near_surface")
     with cj.precision("float64"):
-        sol = cj.solve(case.mesh("float64"), case.P, case.L, method="walk")
+        sol = cj.solve(case.mesh("float64"), case.P, case.L, method="walk", **GENERAL)
     status = np.asarray(sol.status)
     assert (status == Status.FOUND).sum() >= 4, sol.summary()
     assert (status != Status.LEFT_MESH).sum() >= 24, sol.summary()
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_walk_refines_a_bracket_on_a_straight_conic_to_the_root(dtype):
+    # Solutions on edges and at vertices of the flat pool with the path's plane along grid
+    # lines: the conic is a straight line along the tangent, every cut of the bracket has
+    # pencil angle 0, and the walk used to stop after one cut as if the bracket had
+    # stalled: NOT_CONVERGED on 2 (float32) and 3 (float64) of these 64 lanes. The 4
+    # LOST_CURVE lanes are curves running exactly along a mesh edge (docs/stability.md).
+    case = _case("vertex_edge_flat")
+    with cj.precision(dtype):
+        mesh = case.mesh(dtype)
+        sol = cj.solve(mesh, np.asarray(case.P, dtype), np.asarray(case.L, dtype), method="walk", **GENERAL)
+    status = np.asarray(sol.status)
+    assert not np.any(status == Status.NOT_CONVERGED), sol.summary()
+    assert np.sum(status == Status.FOUND) >= 60, sol.summary()

@@ -458,8 +458,12 @@ def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _Stat
         side = s.side
     found = ok & transmits & (jnp.abs(fm) <= tol)
     eps = jnp.finfo(p.dtype).eps
+    # The pencil angle only measures a curved arc: on a straight one (a line conic along
+    # the tangent, e.g. a flat surface) every chord cut has phi = 0 up to rounding, so
+    # there the bracket is judged by its end points alone.
+    curved = jnp.maximum(jnp.abs(phi_lo), jnp.abs(phi_hi)) > jnp.sqrt(eps)
     stalled = (jnp.linalg.norm(ab_hi - ab_lo) <= 4 * eps * jnp.maximum(jnp.linalg.norm(ab_hi), 1)) | (
-        jnp.abs(phi_hi - phi_lo) <= 4 * eps * jnp.maximum(jnp.abs(phi_hi), 1e-30))
+        curved & (jnp.abs(phi_hi - phi_lo) <= 4 * eps * jnp.maximum(jnp.abs(phi_hi), 1e-30)))
     mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
     status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
     # A TIR search that closed in on the onset without a sign change found no root: a walk
