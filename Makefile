@@ -24,6 +24,7 @@ figures: $(STAMP)
 	$(PY) -m experiments.float32_audit
 	$(PY) -m experiments.kernel_approximations
 	$(PY) -m experiments.start_point_throughput
+	$(PY) -m experiments.irradiance_agreement
 	$(VENV)/bin/caustics-jax demo
 
 # Shader reference data (docs/export.md) and the GLSL ports run against it on a Vulkan
