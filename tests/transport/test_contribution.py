@@ -30,10 +30,10 @@ UP = np.array([0.0, 0.0, 1.0])
 REL_TOL = {jnp.float32: 2e-5, jnp.float64: 1e-9}
 
 
-@pytest.mark.parametrize("method", ["walk", "newton"])
+@pytest.mark.parametrize("method, features", [("walk", None), ("newton", None), ("walk", "auto")])
 @pytest.mark.parametrize("dtype", DTYPES)
 @given(seed=st.integers(0, 2**31 - 1))
-def test_irradiance_matches_flat_interface_formula(dtype, method, seed):
+def test_irradiance_matches_flat_interface_formula(dtype, method, features, seed):
     """`eta^2 T cos D^-1 I_e` equals the exact flat-interface irradiance (a wrong eta^2, cos or T fails)
     wherever the solver finds the path; lanes it does not find carry a failure status and E = 0."""
     rng = np.random.default_rng(seed)
@@ -42,7 +42,8 @@ def test_irradiance_matches_flat_interface_formula(dtype, method, seed):
     eta = rng.uniform(1.05, 1.6)
     sigma_t = rng.uniform(0, 0.5)
     E, sol = irradiance(scene.surface, scene.receivers, jnp.asarray(L, dtype), intensity=3.0, eta=eta,
-                        receiver_normal=UP, sigma_t=sigma_t, method=method, return_solution=True)
+                        receiver_normal=UP, sigma_t=sigma_t, method=method, return_solution=True,
+                        features=features)
     E, found = np.asarray(E), np.asarray(sol.found)
     ref, M = flat_interface_irradiance(np.asarray(scene.receivers), L, 0.0, eta, 3.0, sigma_t, return_point=True)
     assert E.dtype == dtype
@@ -53,12 +54,12 @@ def test_irradiance_matches_flat_interface_formula(dtype, method, seed):
     np.testing.assert_array_less(np.abs(E / ref - 1)[inside & found], REL_TOL[dtype])
     assert np.all(E[outside | ~found] == 0)
     assert inside.mean() > 0.5
-    if method == "newton":
+    if method == "newton" or features == "auto":  # "auto": the flat pool's closed form
         assert np.all(found[inside])
     else:
-        # The walk misses some paths whose M0 is in total internal reflection (low lights,
-        # large eta): they end LEFT_MESH with E = 0 (checked above); tests/test_walk.py.
-        assert found[inside].mean() > 0.5
+        # The general walk misses a few paths whose M0 lies in total internal reflection
+        # (low lights, large eta; at most 5 of 1024 measured): LEFT_MESH with E = 0.
+        assert found[inside].mean() > 0.99
 
 
 def test_paraxial_limit_on_axis():
