@@ -5,6 +5,7 @@ Every scene here has 256 receivers and a 512-face surface, so the general and th
 compacted batches share one lane bucket and one mesh bucket: one walk compile per dtype.
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -59,7 +60,8 @@ def test_features_flags():
     # A tilted flat square (no grid): flat. An L-shaped flat mesh (not convex: the walk
     # from M0 can leave it where the closed form would not): constant normals, not flat.
     n = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
-    u = np.cross(n, [1.0, 0, 0]); u /= np.linalg.norm(u)
+    u = np.cross(n, [1.0, 0, 0])
+    u /= np.linalg.norm(u)
     w = np.cross(n, u)
     grid = np.array([(i, j) for j in range(3) for i in range(3)], float)
     square = [(0, 1, 4), (0, 4, 3), (1, 2, 5), (1, 5, 4), (3, 4, 7), (3, 7, 6), (4, 5, 8), (4, 8, 7)]
@@ -118,6 +120,34 @@ def test_auto_gives_the_general_paths_statuses_points_and_irradiance(name, dtype
         np.testing.assert_allclose(E_a, E_g, rtol=FLAT_E_RTOL[dtype])
     else:
         np.testing.assert_array_equal(E_a, E_g)
+
+
+def test_auto_gives_the_general_paths_newton_solution_on_a_partly_covered_floor():
+    """Newton (`n_starts=1`) is compacted the same way: every field identical."""
+    mesh, P, L = partly_covered_floor(jnp.float64)
+    g = solve(mesh, P, L, method="newton", features=None)
+    a = solve(mesh, P, L, method="newton")
+    assert np.sum(np.asarray(g.status) == Status.NO_CROSSING) > 64 and np.asarray(g.found).sum() > 64
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(g), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_flat_auto_matches_the_walk_for_random_lights_and_eta(dtype):
+    """Low and oblique lights and large eta (M0 in total internal reflection for some
+    lanes): the closed form settles exactly the lanes the walk finds, at the same points."""
+    rng = np.random.default_rng(7)
+    scene = scenes.flat_pool(512, n_receivers=16, dtype=dtype)
+    P = scene.receivers
+    for _ in range(4):
+        L = jnp.broadcast_to(jnp.asarray([rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0.5, 5)],
+                                         dtype), P.shape)
+        eta = rng.uniform(1.05, 1.6)
+        g = solve(scene.surface, P, L, eta=eta, features=None)
+        a = solve(scene.surface, P, L, eta=eta)
+        np.testing.assert_array_equal(np.asarray(a.status), np.asarray(g.status))
+        np.testing.assert_allclose(np.asarray(a.point), np.asarray(g.point), rtol=0,
+                                   atol=FLAT_POINT_TOL[dtype])
 
 
 @pytest.mark.parametrize("dtype", DTYPES)

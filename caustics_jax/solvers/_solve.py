@@ -267,6 +267,8 @@ def _compacted_start_points(mesh: SurfaceMesh, P, L):
     idx = np.flatnonzero(meets)
     if idx.size == 0:
         return base
+    if idx.size == n:  # nothing to skip: no gather, no scatter
+        return tuple(start_points(mesh, P, L))
     g, real = compact_index(idx)
     sub = start_points(mesh, P[g], L[g])
     return scatter_lanes(base, g, real, (sub.face, sub.barycentric, sub.found))
@@ -296,12 +298,16 @@ def _solve_specialised(mesh, P, L, eta, method, start, opts, feats: SceneFeature
         need[g[keep]] = False
     if not need.any():
         return sol
+
+    def run(P, L, face, ab0, found):
+        if method == "walk":
+            static = opts._replace(tol=None, max_steps=0)
+            return _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
+                               jnp.int32(opts.max_steps), static)
+        return solve_newton(mesh, P, L, eta, (face, ab0, found), opts)
+
+    if need.all():  # nothing to skip: the general batch as is
+        P, L, start = _pad_lanes(P, L, (face, ab0, found))
+        return jax.tree.map(lambda x: x[:n], run(P, L, *start))
     g, real = compact_index(np.flatnonzero(need))
-    found_g = found[g] & jnp.asarray(real)
-    if method == "walk":
-        static = opts._replace(tol=None, max_steps=0)
-        sub = _walk_batch(bucketed(mesh), P[g], L[g], face[g], ab0[g], found_g, eta, tol,
-                          jnp.int32(opts.max_steps), static)
-    else:
-        sub = solve_newton(mesh, P[g], L[g], eta, (face[g], ab0[g], found_g), opts)
-    return scatter_lanes(sol, g, real, sub)
+    return scatter_lanes(sol, g, real, run(P[g], L[g], face[g], ab0[g], found[g] & jnp.asarray(real)))

@@ -159,6 +159,10 @@ def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
     idx = np.flatnonzero(np.asarray(sol.found))
     if idx.size == 0:
         return E
+    if idx.size == n:  # every lane found: nothing to skip
+        V, N = mesh.triangle(sol.triangle)
+        return path_irradiance(V, N, P, L, sol.barycentric, eta, jnp.asarray(intensity, dtype),
+                               jnp.asarray(n_P, dtype), sigma_t)[0]
     g, real = compact_index(idx)
     V, N = mesh.triangle(sol.triangle[g])
     I_e = np.broadcast_to(intensity, (n,))[g]
