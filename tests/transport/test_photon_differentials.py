@@ -127,3 +127,23 @@ def test_bad_mode_raises():
         compression_ratio(*geo, l00, 1.0, mode="refrakt")
     with pytest.raises(ValueError, match="res"):
         light_view_texels(scenes.flat_pool(128, dtype=jnp.float64).surface, [0, 0, 3.0], 1)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_photon_differential_irradiance_matches_flat_interface_formula(dtype):
+    """Forward irradiance at each texel's landing point equals the exact flat-interface value
+    (measured max relative error 1.1e-15 in float64, 4.9e-7 in float32; bounds 10x)."""
+    from caustics_jax.testing import flat_interface_irradiance
+    from caustics_jax.transport import photon_differential_irradiance
+
+    mesh = scenes.flat_pool(2048, dtype=dtype).surface
+    L = np.array([0.4, -0.3, 3.0])
+    tx = light_view_texels(mesh, L, 32)
+    V, N = mesh.triangle(tx.face)
+    E, Y, ok = photon_differential_irradiance(V, N, jnp.asarray(L, dtype), tx.X, 1.333, 2.0,
+                                              jnp.asarray([0, 0, -1.0], dtype), jnp.asarray(UP, dtype), 0.2)
+    assert E.dtype == dtype
+    ok = np.asarray(ok & tx.found)
+    assert ok.mean() > 0.99
+    ref = flat_interface_irradiance(np.asarray(Y, np.float64)[ok], L, 0.0, 1.333, 2.0, 0.2)
+    np.testing.assert_allclose(np.asarray(E, np.float64)[ok], ref, rtol=5e-6 if dtype == jnp.float32 else 1e-14)
