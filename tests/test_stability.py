@@ -164,3 +164,20 @@ def test_walk_refines_a_bracket_on_a_straight_conic_to_the_root(dtype):
     status = np.asarray(sol.status)
     assert not np.any(status == Status.NOT_CONVERGED), sol.summary()
     assert np.sum(status == Status.FOUND) >= 60, sol.summary()
+
+
+@functools.cache
+def _exhaustive_vertex_edge():
+    case = stress.stress_case("vertex_edge", 32, seed=0)
+    with cj.precision("float64"):
+        sol = cj.solve(case.mesh("float64"), case.P, case.L, method="exhaustive")
+    return np.asarray(sol.found), np.asarray(sol.status)
+
+
+def test_exhaustive_finds_solutions_on_edges_and_at_vertices():
+    # Planted on edges (odd lanes) and at vertices (even lanes) of the wavy pool. f at an
+    # arc's end point is rounding noise, so the scan sampled up to that point missed a
+    # root exactly there: 12 of these 24 lanes (not at normal incidence) were found.
+    found, _ = _exhaustive_vertex_edge()
+    oblique = np.arange(32) % 4 != 1
+    assert np.all(found[oblique]), np.nonzero(~found & oblique)[0]

@@ -177,7 +177,11 @@ def _arcs(mesh, P, L, face) -> _Arcs:
 
 def _sample_u(samples, dtype):
     u = jnp.linspace(0, 1, samples + 1)[1:].astype(dtype)
-    return u.at[0].set(1e-9)  # just off the arc start
+    # Just off the arc start, and just past its end: a root exactly on an edge or at a
+    # vertex (the arc's end) is then bracketed by a sign change; at u = 1 alone f is
+    # rounding noise of either sign, and the next face's arc starts just past it.
+    # Roots past the end are rejected in `_refine_brackets` (clamped to the face).
+    return u.at[0].set(1e-9).at[-1].set(1 + 1e-6)
 
 
 def _brackets(mesh, P, L, face, eta, samples):
@@ -243,6 +247,10 @@ def _scan_brackets(mesh, P, L, faces, eta, samples):
 def _refine_brackets(mesh, P, L, faces, arc, i, kind, eta, samples, iters):
     ab, ok = jax.vmap(lambda p, l, f, a, j, k: _refine_slot(mesh, p, l, f, eta, a, j, k, samples, iters))(
         P, L, faces, arc, i, kind)
+    # Into the closed face (a root refined just past an arc's end is judged where it
+    # belongs: on the edge, or rejected below when f there exceeds tol).
+    a = jnp.clip(ab[:, 0], 0, 1)
+    ab = jnp.stack([a, jnp.clip(ab[:, 1], 0, 1 - a)], -1)
     V, N = mesh.triangle(faces)
     fa, st, _ = jax.vmap(lambda v, n, p, l, x: _f(v, n, p, l, x[None], eta))(V, N, P, L, ab)
     # f is a sine: it also vanishes where the refracted ray points straight away from L
