@@ -181,3 +181,12 @@ def test_exhaustive_finds_solutions_on_edges_and_at_vertices():
     found, _ = _exhaustive_vertex_edge()
     oblique = np.arange(32) % 4 != 1
     assert np.all(found[oblique]), np.nonzero(~found & oblique)[0]
+
+
+def test_exhaustive_finds_m0_when_it_is_a_solution_at_a_singular_point_of_the_conic():
+    # Normal incidence at a vertex: P, L and the vertex normal aligned, so M0 is the
+    # solution and a singular point of the conic, with no arc through it to scan. The
+    # scan alone found none of these 8 lanes.
+    found, _ = _exhaustive_vertex_edge()
+    normal = np.arange(32) % 4 == 1
+    assert np.all(found[normal]), np.nonzero(~found & normal)[0]

@@ -329,6 +329,18 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     tris = np.concatenate(tris) if tris else np.zeros(0, np.int32)
     owner = np.concatenate(res) if res else np.zeros(0, np.int32)
     abs_ = np.concatenate(abs_) if abs_ else np.zeros((0, 2))
+    # M0 may be a solution where the conic is singular and has no arc through it (P, L
+    # and the normal aligned at a vertex, or on a flat surface where the conic vanishes):
+    # test it directly, as the walk does.
+    f0, st0 = (np.asarray(x) for x in _f_status_points(mesh, jnp.asarray(np.maximum(np.asarray(face0), 0)),
+                                                        jnp.asarray(ab0), P, L, eta))
+    at_m0 = np.nonzero(np.asarray(found0) & (np.abs(f0) <= tol) & (st0 == 0))[0]
+    V0, _ = mesh.triangle(face0)
+    M0 = np.asarray(barycentric_point(V0, ab0))
+    pts = np.concatenate([pts, M0[at_m0]])
+    tris = np.concatenate([tris, np.asarray(face0)[at_m0]]).astype(np.int32)
+    owner = np.concatenate([owner, at_m0]).astype(np.int32)
+    abs_ = np.concatenate([abs_, np.asarray(ab0)[at_m0]])
 
     # Deduplicate per lane (each arc from both ends; shared edges from both faces).
     per_lane_pts = [[] for _ in range(n)]
@@ -352,8 +364,6 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
             all_tris[i, :count[i]] = per_lane_tri[i]
             all_ab[i, :count[i]] = np.stack(per_lane_ab[i])
 
-    V0, _ = mesh.triangle(face0)
-    M0 = np.asarray(barycentric_point(V0, ab0))
     found0 = np.asarray(found0)
     # The solution nearest M0; without M0 (segment P -> L misses the surface, yet a path
     # may exist), the one nearest the line PL.
@@ -385,6 +395,14 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     if return_all:
         return ExhaustiveSolution(sol, all_points, all_tris, count)
     return sol
+
+
+@jax.jit
+def _f_status_points(mesh, faces, ab, P, L, eta):
+    """`f` and the walk's status (OK = 0 only for a forward refracted ray) at `(face, ab)`."""
+    V, N = mesh.triangle(faces)
+    f, st, _ = jax.vmap(lambda v, n, p, l, a: _f(v, n, p, l, a[None], eta))(V, N, P, L, ab)
+    return f[:, 0], st[:, 0]
 
 
 @jax.jit
