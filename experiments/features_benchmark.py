@@ -10,11 +10,12 @@
 #   every side, a quarter of the receivers above the water (many segments miss it);
 # - **wavy pool**: Gerstner waves over the whole floor, nearly every lane needs the walk.
 #
-# Throughput: median of `REPEATS` calls after a first (compiling) call, both paths in
-# the same process; compile time (first call minus the median) and the host-side
-# analysis `features(mesh)` reported separately. The specialised path is timed with the
-# `SceneFeatures` computed once (what a renderer does per mesh) and with `"auto"` (which
-# analyses on every call).
+# Throughput: median of `REPEATS` calls after a first (compiling) call, all paths in the
+# same process, interleaved call by call (the machine is shared: its load drifts).
+# Compile time (first call minus the median) and the host-side analysis
+# `features(mesh)` are reported separately. The specialised path is timed with the
+# `SceneFeatures` computed once (what a renderer does per mesh) and with `"auto"`
+# (which analyses on every call).
 #
 # Run: `python -m experiments.features_benchmark` (writes `figures/features_benchmark.png`
 # and `.json`, prints a table).
@@ -45,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FIG = ROOT / "figures" / "features_benchmark.png"
 N_TRIANGLES = 8192  # seed 001 Fig. 10's range, the `make demo` pool
 N_SIDE = 128  # 16,384 receivers
-REPEATS = 5
+REPEATS = 7
 DTYPES = ("float32", "float64")
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -69,17 +70,24 @@ def make_scene(name, dtype):
     return scene.surface, scene.receivers, scene.lights.endpoint(scene.receivers)
 
 
-def timed(fn):
-    """(first-call seconds, median seconds of REPEATS further calls, last result)."""
-    t = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    first = time.perf_counter() - t
-    times = []
-    for _ in range(REPEATS):
+def timed_interleaved(fns: dict):
+    """Per variant: (first-call seconds, median of REPEATS further calls, last result).
+
+    After the first (compiling) calls, each round calls every variant once, the order
+    rotated per round: the load of the shared machine changes over seconds, and ratios of
+    interleaved medians follow it far less than back-to-back blocks of calls."""
+    first, times, out = {}, {k: [] for k in fns}, {}
+    for k, fn in fns.items():
         t = time.perf_counter()
-        out = jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t)
-    return first, float(np.median(times)), out
+        out[k] = jax.block_until_ready(fn())
+        first[k] = time.perf_counter() - t
+    keys = list(fns)
+    for r in range(REPEATS):
+        for k in keys[r % len(keys):] + keys[:r % len(keys)]:
+            t = time.perf_counter()
+            out[k] = jax.block_until_ready(fns[k]())
+            times[k].append(time.perf_counter() - t)
+    return {k: (first[k], float(np.median(times[k])), out[k]) for k in fns}
 
 
 SCENES = ("flat pool", "partly covered floor", "wavy pool")
@@ -96,16 +104,17 @@ for dtype in DTYPES:
         row = dict(scene=name, dtype=dtype, lanes=n, triangles=int(mesh.faces.shape[0]),
                    features=feats._asdict(), analyse_s=t_analyse)
         variants = {"general": None, "specialised": feats, "auto": "auto"}
+        solves = timed_interleaved({key: (lambda f=f, m=mesh, P=P, L=L: solve(m, P, L, features=f))
+                                    for key, f in variants.items()})
+        irrs = timed_interleaved({key: (lambda f=f, m=mesh, P=P, L=L: irradiance(
+            m, P, L, intensity=1.0, receiver_normal=UP, features=f)) for key, f in variants.items()})
         sols, Es = {}, {}
-        for key, f in variants.items():
-            first, med, sol = timed(lambda f=f, m=mesh, P=P, L=L: solve(m, P, L, features=f))
-            row[f"solve_{key}"] = dict(first_s=first, median_s=med, compile_s=first - med, per_s=n / med)
-            sols[key] = sol
-            first, med, E = timed(lambda f=f, m=mesh, P=P, L=L: irradiance(
-                m, P, L, intensity=1.0, receiver_normal=UP, features=f))
-            row[f"irradiance_{key}"] = dict(first_s=first, median_s=med, compile_s=first - med,
-                                            per_s=n / med)
-            Es[key] = np.asarray(E, np.float64)
+        for key in variants:
+            for what, res in (("solve", solves), ("irradiance", irrs)):
+                first, med, _ = res[key]
+                row[f"{what}_{key}"] = dict(first_s=first, median_s=med, compile_s=first - med, per_s=n / med)
+            sols[key] = solves[key][2]
+            Es[key] = np.asarray(irrs[key][2], np.float64)
         g, s = sols["general"], sols["specialised"]
         found = np.asarray(g.found)
         E_g, E_s = Es["general"], Es["specialised"]
