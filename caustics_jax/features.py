@@ -80,16 +80,21 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
     directional = _directional(lights_or_L)
     eps = float(np.finfo(np.dtype(mesh.dtype)).eps)
-    V = np.asarray(mesh.vertices, np.float64)
-    N = np.asarray(mesh.normals, np.float64)
+    N_unit = np.asarray(mesh.normals)  # unit: SurfaceMesh normalises them in float64
     F = np.asarray(mesh.faces)
-    N_face = np.asarray(mesh.face_normals, np.float64)
-    N_unit = N / np.linalg.norm(N, axis=-1, keepdims=True)
     tol_n = _EPS_FACTOR * eps
-    spread = np.max(np.abs(N_unit[F] - N_unit[F[:, :1]]), axis=(1, 2))
-    constant_normals = bool(np.all(spread <= tol_n))
+
+    def constant(faces):
+        N_f = N_unit[faces].astype(np.float64)
+        return bool(np.all(np.abs(N_f - N_f[:, :1]) <= tol_n))
+
+    # A curved surface fails on its first faces: "auto" then costs O(4096), not O(F)
+    # (155 ms at 1M triangles measured for the full check).
+    constant_normals = constant(F[:4096]) and constant(F)
     return SceneFeatures(
-        flat=constant_normals and _is_flat(V, N_unit, F, N_face, eps),
+        flat=constant_normals and _is_flat(np.asarray(mesh.vertices, np.float64),
+                                           N_unit.astype(np.float64), F,
+                                           np.asarray(mesh.face_normals, np.float64), eps),
         constant_normals=constant_normals,
         grid=mesh.grid is not None,
         directional=directional,
