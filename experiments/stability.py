@@ -304,7 +304,7 @@ def kernel_table(result) -> str:
 def plot(result, path):
     cats = list(result["categories"])
     y = np.arange(len(cats))
-    fig, axes = plt.subplots(1, 2, figsize=(13, 0.42 * len(cats) + 2.4), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 0.42 * len(cats) + 3.4), sharey=True)
     styles = {("walk", "float32"): ("C0", "o"), ("walk", "float64"): ("C0", "s"),
               ("newton", "float32"): ("C1", "o"), ("newton", "float64"): ("C1", "s"),
               ("exhaustive", "float64"): ("C2", "D")}
@@ -321,21 +321,26 @@ def plot(result, path):
         axes[0].scatter(frac, y + off, color=color, marker=marker, facecolor=face, label=f"{name} {dtype}")
         axes[1].scatter(amax, y + off, color=color, marker=marker, facecolor=face, label=f"{name} {dtype} (max)")
         axes[1].scatter(a99, y + off, color=color, marker="|", s=60)
+    crossing = [1 - result["categories"][c]["solvers"]["float64"]["walk"]["status"].get("NO_CROSSING", 0)
+                / result["categories"][c]["solvers"]["float64"]["walk"]["n"] for c in cats]
+    axes[0].scatter(crossing, y, marker="|", s=400, color="gray", label="lanes with a start point M0")
     for dtype, ls in (("float32", "--"), ("float64", ":")):
         axes[1].axvline(default_tol(dtype), color="gray", ls=ls, lw=1, label=f"tol {dtype}")
     axes[0].set_yticks(y, cats)
     axes[0].invert_yaxis()
     axes[0].set_xlabel("lanes FOUND (fraction of planted paths)")
     axes[0].set_title("Success on planted paths, per stress category")
-    axes[0].legend(fontsize=7, loc="lower left")
+    axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3)
     axes[1].set_xscale("log")
     axes[1].set_xlabel("refraction angle error of FOUND lanes (rad, float64 re-evaluation; marker max, bar p99)")
     axes[1].set_title("Accuracy of what the solvers report as found")
-    axes[1].legend(fontsize=7, loc="lower right")
+    axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3)
     nan = sum(v["nonfinite"] for v in totals(result).values())
     silent = sum(v["silent"] for v in totals(result).values())
+    beyond = sum(v.get("silent_beyond_rounding_bound", 0) for v in totals(result).values())
     fig.suptitle(f"Stress suite: walk, optimistix Newton (half-vector) and exhaustive, float32 (open) / "
-                 f"float64 (filled), {result['n']} paths per category; NaN/Inf lanes {nan}, silent failures {silent}",
+                 f"float64 (filled), {result['n']} paths per category; NaN/Inf lanes {nan}, silent failures {silent} "
+                 f"({beyond} beyond refract's own rounding near the critical angle)",
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -347,8 +352,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="64 paths, 16 exhaustive lanes, no `large`")
     ap.add_argument("--out", default=str(ROOT / "figures"))
+    ap.add_argument("--replot", action="store_true", help="redraw the figure from stability.json")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
+    if args.replot:  # figure only, from the JSON of an earlier run
+        result = json.loads((pathlib.Path(args.out) / "stability.json").read_text())
+        plot(result, pathlib.Path(args.out) / "stability.png")
+        return
     if args.quick:
         result = run(64, 16, tuple(c for c in stress.CATEGORIES if c != "large"))
     else:
