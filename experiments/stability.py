@@ -17,7 +17,7 @@
 #   kernel).
 #
 # Run: `python -m experiments.stability` (writes `figures/stability.json`,
-# `figures/stability.png`; about 4 minutes on 2 cores) or `--quick` (about 1 minute: fewer
+# `figures/stability.png`; about 2 minutes on 2 cores) or `--quick` (about 1.5 minutes: fewer
 # lanes, no `large` category).
 
 # %%
