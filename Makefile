@@ -25,6 +25,9 @@ figures: $(STAMP)
 	$(PY) -m experiments.kernel_approximations
 	$(PY) -m experiments.start_point_throughput
 	$(PY) -m experiments.irradiance_agreement
+	$(PY) -m experiments.features_benchmark
+	$(PY) -m experiments.stability
+	$(PY) -m experiments.scaling
 	$(VENV)/bin/caustics-jax demo
 
 # Shader reference data (docs/export.md) and the GLSL ports run against it on a Vulkan

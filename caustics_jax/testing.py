@@ -253,3 +253,20 @@ def flat_interface_irradiance(P, L, z_surface: float, eta: float, intensity: flo
     u = (P[..., :2] - L[..., :2]) / np.where(on_axis, 1, rho)[..., None]
     M_xy = L[..., :2] + (h * np.tan(th_a))[..., None] * u
     return E, np.concatenate([M_xy, np.full(M_xy.shape[:-1] + (1,), z_surface)], -1)
+
+
+def partly_covered_floor(dtype, *, n_triangles: int = 512, n: int = 16, half: float = 3.5):
+    """A wavy pool (water to |x|, |y| = 2.1 m) over an `n x n` receiver grid on a floor to
+    `half` m, every 4th receiver 0.3 m above the water: many segments P -> L miss the
+    surface (`NO_CROSSING`). Returns `(mesh, P, L)` (shared by the features tests and
+    benchmark)."""
+    import jax.numpy as jnp
+
+    from . import scenes
+
+    scene = scenes.wavy_pool(n_triangles, n_receivers=16, dtype=dtype)
+    u = (np.arange(n) + 0.5) / n * 2 * half - half
+    X, Y = np.meshgrid(u, u, indexing="xy")
+    z = np.where(np.arange(n * n) % 4 == 0, 0.3, -1.0)
+    P = jnp.asarray(np.stack([X.ravel(), Y.ravel(), z], -1), dtype)
+    return scene.surface, P, scene.lights.endpoint(P)

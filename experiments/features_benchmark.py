@@ -31,7 +31,6 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built explicitly)
 
-import jax.numpy as jnp  # noqa: E402
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
@@ -40,6 +39,7 @@ import numpy as np  # noqa: E402
 
 from caustics_jax import features, scenes  # noqa: E402
 from caustics_jax.solvers import Status, solve  # noqa: E402
+from caustics_jax.testing import partly_covered_floor  # noqa: E402
 from caustics_jax.transport import irradiance  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,20 +51,9 @@ DTYPES = ("float32", "float64")
 UP = np.array([0.0, 0.0, 1.0])
 
 
-def partly_covered_floor(dtype):
-    """Wavy water to |x|, |y| = 2.1 m over a floor to 4 m; every 4th receiver 0.3 m above
-    the water (same construction as `tests/test_features.py`, larger)."""
-    scene = scenes.wavy_pool(N_TRIANGLES, dtype=dtype)
-    u = (np.arange(N_SIDE) + 0.5) / N_SIDE * 8.0 - 4.0
-    X, Y = np.meshgrid(u, u, indexing="xy")
-    z = np.where(np.arange(N_SIDE**2) % 4 == 0, 0.3, -1.0)
-    P = jnp.asarray(np.stack([X.ravel(), Y.ravel(), z], -1), dtype)
-    return scene.surface, P, scene.lights.endpoint(P)
-
-
 def make_scene(name, dtype):
     if name == "partly covered floor":
-        return partly_covered_floor(dtype)
+        return partly_covered_floor(dtype, n_triangles=N_TRIANGLES, n=N_SIDE, half=4.0)
     make = scenes.flat_pool if name == "flat pool" else scenes.wavy_pool
     scene = make(N_TRIANGLES, n_receivers=N_SIDE, dtype=dtype)
     return scene.surface, scene.receivers, scene.lights.endpoint(scene.receivers)

@@ -339,7 +339,7 @@ def plot(result, path):
     silent = sum(v["silent"] for v in totals(result).values())
     beyond = sum(v.get("silent_beyond_rounding_bound", 0) for v in totals(result).values())
     fig.suptitle(f"Stress suite: walk, optimistix Newton (half-vector) and exhaustive, float32 (open) / "
-                 f"float64 (filled), {result['n']} paths per category; NaN/Inf lanes {nan}, silent failures {silent} "
+                 f"float64 (filled), {result['n']} paths per category\nNaN/Inf lanes {nan}, silent failures {silent} "
                  f"({beyond} beyond refract's own rounding near the critical angle)",
                  fontsize=10)
     fig.tight_layout()

@@ -14,7 +14,7 @@ import caustics_jax as cj
 from caustics_jax import scenes
 from caustics_jax.features import SceneFeatures, features
 from caustics_jax.solvers import Status, _solve, solve
-from caustics_jax.testing import flat_interface_irradiance
+from caustics_jax.testing import flat_interface_irradiance, partly_covered_floor
 from caustics_jax.transport import irradiance
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -25,18 +25,6 @@ UP = np.array([0.0, 0.0, 1.0])
 # 4.2e-11 m (float64). Bounds with margin; elsewhere the points are bit-identical.
 FLAT_POINT_TOL = {jnp.float32: 5e-5, jnp.float64: 1e-9}
 FLAT_E_RTOL = {jnp.float32: 1e-3, jnp.float64: 1e-8}
-
-
-def partly_covered_floor(dtype, n: int = 16, half: float = 3.5) -> tuple:
-    """A wavy pool (water to |x|, |y| = 2.1 m) over an `n x n` receiver grid on a floor
-    reaching `half` m, a quarter of the receivers lifted above the water: many segments
-    miss the surface (`NO_CROSSING`)."""
-    scene = scenes.wavy_pool(512, n_receivers=16, dtype=dtype)
-    u = (np.arange(n) + 0.5) / n * 2 * half - half
-    X, Y = np.meshgrid(u, u, indexing="xy")
-    z = np.where((np.arange(n * n) % 4) == 0, 0.3, -1.0)
-    P = np.stack([X.ravel(), Y.ravel(), z], -1)
-    return scene.surface, jnp.asarray(P, dtype), scene.lights.endpoint(jnp.asarray(P, dtype))
 
 
 def make_scene(name, dtype):
