@@ -4,7 +4,7 @@ an independent flat-interface formula, brute-force photons, and the forward phot
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from caustics_jax import scenes
@@ -32,6 +32,7 @@ REL_TOL = {jnp.float32: 2e-5, jnp.float64: 1e-9}
 
 @pytest.mark.parametrize("method, features", [("walk", None), ("newton", None), ("walk", "auto")])
 @pytest.mark.parametrize("dtype", DTYPES)
+@settings(max_examples=5)  # each example is 1024 receivers under its own light and eta
 @given(seed=st.integers(0, 2**31 - 1))
 def test_irradiance_matches_flat_interface_formula(dtype, method, features, seed):
     """`eta^2 T cos D^-1 I_e` equals the exact flat-interface irradiance (a wrong eta^2, cos or T fails)
@@ -97,7 +98,7 @@ def test_irradiance_agrees_with_brute_force_photons(dtype):
     are Monte-Carlo noise (z-scores against the photon standard error)."""
     scene = scenes.wavy_pool(4096, amplitude=0.04, dtype=dtype)
     receiver = ReceiverGrid(-1.0, -1.2, 1.2, -1.2, 1.2, 12, 12)
-    pm = photon_irradiance(scene.surface, LIGHT, intensity=1.0, receiver=receiver, n_photons=1 << 21, seed=3,
+    pm = photon_irradiance(scene.surface, LIGHT, intensity=1.0, receiver=receiver, n_photons=1 << 20, seed=3,
                            chunk=1 << 18)
     k = 3  # cell average by the 3 x 3 midpoint rule
     P = jnp.asarray(receiver.subsamples(k).reshape(-1, 3), dtype)
@@ -108,7 +109,7 @@ def test_irradiance_agrees_with_brute_force_photons(dtype):
     # no cell beyond 4.5 sigma. Dropping eta^2 shifts every cell by ~40 sigma.
     assert 0.6 < np.mean(z**2) < 1.5, np.mean(z**2)
     assert np.max(np.abs(z)) < 4.5
-    assert np.all(pm.hits > 1000)
+    assert np.all(pm.hits > 500)
 
 
 def test_photon_differential_equals_walk_on_flat_and_converges_on_curved():
