@@ -6,7 +6,6 @@ the package: use `precision("float64")` or `enable_x64()`.
 
 from . import scenes
 from ._precision import enable_x64, precision
-from .features import SceneFeatures, features
 from .barycentric import barycentric_point, edge_barycentric, interpolated_normal
 from .conic import (
     conic_coefficients,
@@ -16,6 +15,7 @@ from .conic import (
     solve_quadratic,
     tangent_to_world,
 )
+from .features import SceneFeatures, features
 from .geometry import (
     fresnel_reflectance,
     fresnel_transmittance,
