@@ -34,6 +34,17 @@ def reflect(I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"]) -> Float[A
     return I - 2 * dot(N, I)[..., None] * N
 
 
+def refraction_k(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
+    """Refract's `k = 1 - eta^2 (1 - cos_i^2)` (seed 002 eq. 3.1; MATH.md §1): `cos_t^2`.
+
+    `cos_i = dot(N, I)` (either sign), `eta` = n_incident / n_transmitted. Negative under
+    total internal reflection. `refract` and `fresnel_reflectance` both call it.
+    """
+    # GLSL's 1 - eta^2 (1 - cos^2), regrouped: 1 - cos^2 cancels near normal incidence and
+    # 1 - eta^2 sin^2 near grazing; (1 - eta)(1 + eta) + (eta cos)^2 has neither problem.
+    return (1 - eta) * (1 + eta) + (eta * cos_i) ** 2
+
+
 def refract(
     I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"], eta
 ) -> Float[Array, "*batch 3"]:
@@ -46,9 +57,7 @@ def refract(
     """
     eta = jnp.asarray(eta, dtype=I.dtype)[..., None]
     cos_i = dot(N, I)[..., None]
-    # GLSL's 1 - eta^2 (1 - cos^2), regrouped: 1 - cos^2 cancels near normal incidence and
-    # 1 - eta^2 sin^2 near grazing; (1 - eta)(1 + eta) + (eta cos)^2 has neither problem.
-    k = (1 - eta) * (1 + eta) + (eta * cos_i) ** 2
+    k = refraction_k(cos_i, eta)
     transmits = k >= 0
     sqrt_k = _safe_sqrt(k)
     out = eta * I - (eta * cos_i + sqrt_k) * N
@@ -72,7 +81,7 @@ def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*ba
     """
     cos_i = jnp.clip(jnp.abs(cos_i), 0, 1)
     eta = jnp.asarray(eta, dtype=cos_i.dtype)
-    cos_t2 = (1 - eta) * (1 + eta) + (eta * cos_i) ** 2  # 1 - sin_t^2 without cancellation
+    cos_t2 = refraction_k(cos_i, eta)
     cos_t = _safe_sqrt(cos_t2)
     den_s = eta * cos_i + cos_t
     den_p = cos_i + eta * cos_t
