@@ -1,16 +1,18 @@
 """`caustics-jax export`: layout, round trip from the manifest alone, determinism, tolerances,
 and the reference values checked against closed forms the export does not use."""
 
+import importlib
 import json
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from caustics_jax import cli
 from caustics_jax import export as ex
-from caustics_jax.testing import _refract_np
+from caustics_jax.testing.oracle import refract as _refract_np
 
 COUNT = 32
 REQUIRED = {"kernel", "equations", "count", "stride", "fields", "tolerance", "seed", "version", "cases"}
@@ -238,3 +240,44 @@ def test_bad_arguments_raise_value_error_and_the_cli_says_why(tmp_path, capsys):
     with pytest.raises(ValueError, match="bytes"):
         m, _ = ex.load(tmp_path / "ok", "fresnel")
         ex.read_records(m, b"\0" * 3)
+
+
+def test_audit_is_package_data_and_a_missing_or_corrupt_table_is_an_error(tmp_path):
+    packaged = Path(str(ex.AUDIT_FILE))
+    assert packaged.parent == Path(ex.__file__).parent  # ships with the package, not read from a checkout
+    audit = ex.load_audit()
+    assert audit["refract (abs, unit vector)"]["max"] > 0
+    figure = Path(__file__).resolve().parents[1] / "figures" / "float32_audit.json"
+    if figure.exists():  # experiments/float32_audit.py writes both copies
+        assert json.loads(figure.read_text())["float32"] == audit
+    for name, text in (("missing.json", None), ("corrupt.json", "{not json"), ("empty.json", "{}"),
+                       ("nomax.json", '{"float32": {"refract (abs, unit vector)": {"p99": 1e-7}}}')):
+        path = tmp_path / name
+        if text is not None:
+            path.write_text(text)
+        with pytest.raises(RuntimeError, match="float32_audit"):
+            ex.load_audit(path)
+
+
+def test_tolerances_use_the_audit_passed_in_and_never_undercut_it():
+    kernel = ex.KERNELS["refract"]
+    m, _ = ex.export_kernel(kernel, 16, 5)
+    loose = {key: dict(entry, max=1e-4) for key, entry in ex.load_audit().items()}
+    m_loose, _ = ex.export_kernel(kernel, 16, 5, audit=loose)
+    assert m["tolerance"]["T"]["audit"]["max"] == ex.load_audit()["refract (abs, unit vector)"]["max"]
+    assert m_loose["tolerance"]["T"]["abs"] >= ex.SAFETY * 1e-4 > m["tolerance"]["T"]["abs"]
+    with pytest.raises(RuntimeError, match="no entry"):
+        ex.export_kernel(kernel, 16, 5, audit={"other": {"max": 1.0}})
+
+
+@pytest.mark.parametrize("kernel", list(ex.KERNELS))
+def test_each_kernel_is_registered_once_with_a_real_reference_function(kernel):
+    k = ex.KERNELS[kernel]
+    module, _, name = k.reference.rpartition(".")
+    assert callable(getattr(importlib.import_module(module), name)), k.reference
+    assert [f.role for f in k.fields][-1] == "case" and k.fields[-1].name == "case_tag"
+    assert {f.role for f in k.fields[:-1]} == {"input", "output"}
+    with pytest.raises(ValueError, match="registered twice"):
+        ex.register(kernel, equations="", reference=len, inputs={"x": "float"}, outputs={"y": "float"},
+                    generate=k.generate)(k.evaluate)
+    assert ex.KERNELS[kernel] is k

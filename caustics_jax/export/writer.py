@@ -1,0 +1,122 @@
+"""Writing the shader reference data (DESIGN.md "Reference data for shader tests"; docs/export.md).
+
+`export(out_dir)` writes, per registered kernel, `<kernel>.json` (the manifest) and
+`<kernel>.bin` (little-endian std430 records, `records.py`), plus `caustics_records.h`.
+Every record holds the kernel's inputs, rounded to float32, its outputs, the float64
+reference computed *from those rounded inputs* by the package's own kernel and then
+rounded to float32, and a case tag (`random`, `planted`, `adversarial`). Random (and, where
+a kernel asks, planted) candidates pass the kernel's conditioning filter first; the
+tolerances come from `tolerance.py`. Same arguments, same bytes.
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._precision import precision
+from .cases import split
+from .records import CASES, FORMAT_VERSION, c_header, layout, pack_records, record_fields
+from .registry import KERNELS, Kernel
+from .tolerance import derive_tolerance, load_audit
+
+
+def _evaluate(kernel: Kernel, inputs: dict[str, np.ndarray], dtype: str) -> dict[str, np.ndarray]:
+    with precision(dtype):
+        args = {k: jnp.asarray(v, dtype) for k, v in inputs.items()}
+        return {k: np.asarray(v) for k, v in jax.jit(kernel.evaluate)(args).items()}
+
+
+def export_kernel(kernel: Kernel, count: int, seed: int, audit: dict | None = None):
+    """`(manifest, binary bytes)` for one kernel: `count` random and planted records plus the adversarial set.
+
+    `audit` is the float32 audit table (`tolerance.load_audit()`, the package's, when None).
+    """
+    audit = load_audit() if audit is None else audit
+    rng = np.random.default_rng([seed, zlib.crc32(kernel.name.encode())])
+    inputs, case = kernel.generate(rng, count)
+    # inputs as stored (float32), and the reference computed in float64 from exactly those
+    stored = {f.name: np.asarray(inputs[f.name], np.float32) for f in kernel.inputs()}
+    ref = _evaluate(kernel, {k: v.astype(np.float64) for k, v in stored.items()}, "float64")
+    if kernel.keep is not None:
+        x64 = {k: v.astype(np.float64) for k, v in stored.items()}
+        with np.errstate(invalid="ignore", divide="ignore"):  # adversarial rows may be degenerate
+            filtered = (case == CASES["random"]) | ((case == CASES["planted"]) & kernel.filter_planted)
+            keep = kernel.keep(x64, ref) | ~filtered
+    else:
+        keep = np.ones(len(case), bool)
+    n_pl, n_rand = split(count)
+    rand_idx = np.nonzero(keep & (case == CASES["random"]))[0][:n_rand]
+    if len(rand_idx) < n_rand:
+        raise RuntimeError(f"{kernel.name}: only {len(rand_idx)} of {n_rand} random cases are well conditioned")
+    planted_idx = np.nonzero(keep & (case == CASES["planted"]))[0][:n_pl]
+    if len(planted_idx) < n_pl:
+        raise RuntimeError(f"{kernel.name}: only {len(planted_idx)} of {n_pl} planted cases are well conditioned")
+    idx = np.concatenate([rand_idx, planted_idx, np.nonzero(case == CASES["adversarial"])[0]])
+    stored = {k: v[idx] for k, v in stored.items()}
+    ref = {k: v[idx] for k, v in ref.items()}
+    case = case[idx]
+    f32 = _evaluate(kernel, stored, "float32")
+    records = {**stored, **ref, "case_tag": case}
+    tolerance = {}
+    for f in kernel.outputs():
+        if f.dtype == "float32":
+            tolerance[f.name] = derive_tolerance(f, records, ref[f.name], f32[f.name], audit, kernel.audit.get(f.name))
+        else:
+            tolerance[f.name] = {"exact": True}
+    _, stride = layout(kernel.fields)
+    from .. import __version__
+
+    manifest = {
+        "kernel": kernel.name,
+        "equations": kernel.equations,
+        "reference": kernel.reference,
+        "count": int(len(case)),
+        "stride": stride,
+        "endianness": "little",
+        "layout": "std430, vec3 padded to 16 bytes",
+        "fields": record_fields(kernel.fields),
+        "tolerance": tolerance,
+        "tolerance_rule": "float fields: |value - ref| <= abs + rel * scale per element, scale = max |.| of the "
+                          "field (or of scale_field) in the record; integer fields: equal",
+        "cases": {name: {"code": code, "count": int(np.sum(case == code))} for name, code in CASES.items()},
+        "seed": seed,
+        "version": {"format": FORMAT_VERSION, "caustics_jax": __version__},
+    }
+    return manifest, pack_records(kernel.fields, records)
+
+
+def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0) -> list[Path]:
+    """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h` into `out_dir`.
+
+    `count` random and planted records per kernel (a quarter planted), plus each kernel's
+    fixed adversarial cases. Same arguments, same bytes. Raises ValueError on unknown
+    kernel names, a count below 4, a negative seed or an `out_dir` that is a file.
+    """
+    names = list(KERNELS) if not kernels else list(kernels)
+    unknown = [k for k in names if k not in KERNELS]
+    if unknown:
+        raise ValueError(f"unknown kernel(s) {unknown}; choose from {sorted(KERNELS)}")
+    if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 4:
+        raise ValueError(f"count must be an integer >= 4, got {count!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    audit = load_audit()
+    written = []
+    for name in names:
+        manifest, raw = export_kernel(KERNELS[name], int(count), int(seed), audit)
+        (out / f"{name}.json").write_text(json.dumps(manifest, indent=1) + "\n")
+        (out / f"{name}.bin").write_bytes(raw)
+        written += [out / f"{name}.json", out / f"{name}.bin"]
+    (out / "caustics_records.h").write_text(c_header([KERNELS[n] for n in names]))
+    written.append(out / "caustics_records.h")
+    return written
