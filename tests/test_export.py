@@ -5,6 +5,7 @@ import importlib
 import json
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -240,6 +241,40 @@ def test_bad_arguments_raise_value_error_and_the_cli_says_why(tmp_path, capsys):
     with pytest.raises(ValueError, match="bytes"):
         m, _ = ex.load(tmp_path / "ok", "fresnel")
         ex.read_records(m, b"\0" * 3)
+
+
+def _unwritable_dir(tmp_path) -> Path:
+    """An existing directory no file can be created in: mode 0o500, or, where that does not
+    stop writes (root), /proc, whose top level takes no new files."""
+    d = tmp_path / "readonly"
+    d.mkdir()
+    d.chmod(0o500)
+    try:
+        with tempfile.TemporaryFile(dir=d):
+            pass
+    except OSError:
+        return d
+    return Path("/proc")
+
+
+def test_out_below_a_file_or_unwritable_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    def no_work(*args, **kwargs):
+        raise AssertionError("export started working on an --out it cannot write")
+
+    monkeypatch.setattr(ex.writer, "export_kernel", no_work)
+    (tmp_path / "file").write_text("")
+    locked = _unwritable_dir(tmp_path)
+    cases = {tmp_path / "file" / "sub": "is a file, not a directory",
+             tmp_path / "file" / "sub" / "deeper": "is a file, not a directory",
+             locked: "not writable", locked / "new": "not writable"}
+    for out, message in cases.items():
+        with pytest.raises(ValueError, match=message) as info:
+            ex.export(out, kernels=["fresnel"], count=8)
+        assert "\n" not in str(info.value)
+        assert cli.main(["export", "--out", str(out), "--kernels", "fresnel", "--count", "8"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("caustics-jax export: ") and message in err and "Traceback" not in err
+    assert not (locked / "new").exists()
 
 
 def test_audit_is_package_data_and_a_missing_or_corrupt_table_is_an_error(tmp_path):

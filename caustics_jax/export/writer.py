@@ -12,6 +12,7 @@ tolerances come from `tolerance.py`. Same arguments, same bytes.
 from __future__ import annotations
 
 import json
+import tempfile
 import zlib
 from pathlib import Path
 
@@ -91,12 +92,29 @@ def export_kernel(kernel: Kernel, count: int, seed: int, audit: dict | None = No
     return manifest, pack_records(kernel.fields, records)
 
 
+def _check_out_dir(out: Path) -> None:
+    """Create `out` (with parents) and make sure a file can be written there; ValueError, one
+    line, otherwise: before any case is generated, not as a traceback after the work."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} exists and is not a directory")
+    blocker = next((p for p in out.parents if p.exists() and not p.is_dir()), None)
+    if blocker is not None:
+        raise ValueError(f"--out {out}: {blocker} is a file, not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):  # permissions, read-only mounts, /proc, ...
+            pass
+    except OSError as exc:
+        raise ValueError(f"--out {out} is not writable: {exc.strerror or exc}") from None
+
+
 def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0) -> list[Path]:
     """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h` into `out_dir`.
 
     `count` random and planted records per kernel (a quarter planted), plus each kernel's
-    fixed adversarial cases. Same arguments, same bytes. Raises ValueError on unknown
-    kernel names, a count below 4, a negative seed or an `out_dir` that is a file.
+    fixed adversarial cases. Same arguments, same bytes. Raises ValueError, before any
+    work, on unknown kernel names, a count below 4, a negative seed, or an `out_dir` that
+    is a file, lies below a file or cannot be created or written.
     """
     names = list(KERNELS) if not kernels else list(kernels)
     unknown = [k for k in names if k not in KERNELS]
@@ -107,9 +125,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
+    _check_out_dir(out)
     audit = load_audit()
     written = []
     for name in names:
