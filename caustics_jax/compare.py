@@ -8,7 +8,7 @@ One run measures, per solver configuration and dtype, on the same scene and rece
   the fraction where it returned the one nearest the start point `M0`;
 - position error (m) of each returned point against the nearest reference solution (on
   the reference subset) and refraction-angle error (rad) of every found lane, evaluated
-  in float64 on the float64 mesh (`testing.refraction_angle_error`), so float32 lanes
+  in float64 on the float64 mesh (`testing.oracle.refraction_angle_error`), so float32 lanes
   are charged for their rounding too;
 - iterations (walk: triangle crossings plus refinement steps; Newton: optimistix steps
   over all patches and starts), compile time (first call minus a steady call) and
@@ -24,7 +24,6 @@ Timings are only comparable within one run (same machine, same load): report rat
 from __future__ import annotations
 
 import dataclasses
-import sys
 import time
 from collections.abc import Callable
 
@@ -33,10 +32,11 @@ import numpy as np
 
 from . import scenes
 from ._precision import precision
+from .reporting import log, stats
 from .solvers import solve
 from .solvers.walk import default_tol
 from .start_points import start_points
-from .testing import refraction_angle_error
+from .testing.oracle import NumpyMesh, barycentric_point, refraction_angle_error
 
 MAX_REFERENCE_FACES = 20_000
 
@@ -96,10 +96,6 @@ class CompareConfig:
             raise ValueError(f"n_triangles must be >= 8, got {self.n_triangles}")
 
 
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
 def _scene_arrays(cfg: CompareConfig):
     """The float64 scene, `n` receivers (floor grid) and their light endpoints, as numpy."""
     side = int(np.ceil(np.sqrt(cfg.n)))
@@ -112,17 +108,7 @@ def _scene_arrays(cfg: CompareConfig):
     P = np.stack([X.ravel(), Y.ravel(), np.full(side * side, depth)], -1)
     P = P[np.linspace(0, len(P) - 1, cfg.n).astype(int)]  # n lanes spread over the grid
     L = np.asarray(sc.lights.endpoint(P, 0))
-    mesh = sc.surface
-    ref_mesh = _NumpyMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces),
-                          np.asarray(mesh.normals))
-    return sc, ref_mesh, P, L
-
-
-@dataclasses.dataclass
-class _NumpyMesh:
-    vertices: np.ndarray
-    faces: np.ndarray
-    normals: np.ndarray
+    return sc, NumpyMesh.from_mesh(sc.surface), P, L
 
 
 def _timed(fn, repeats: int):
@@ -149,8 +135,7 @@ def _errors(sol, ref_mesh, P, L, eta, ref):
         idx, pts, count = ref["idx"], ref["all_points"], ref["count"]
         has = count > 0
         f_ref = found[idx]
-        V = ref_mesh.vertices[ref_mesh.faces[np.maximum(tri[idx], 0)]]
-        M = V[:, 0] + ab[idx, :1] * (V[:, 1] - V[:, 0]) + ab[idx, 1:] * (V[:, 2] - V[:, 0])
+        M = barycentric_point(ref_mesh.triangles(np.maximum(tri[idx], 0))[0], ab[idx])
         d = np.linalg.norm(pts - M[:, None], axis=-1)
         d = np.where(np.arange(pts.shape[1])[None] < count[:, None], d, np.inf)
         nearest = d.min(1)
@@ -163,19 +148,11 @@ def _errors(sol, ref_mesh, P, L, eta, ref):
     return out
 
 
-def _stats(x):
-    x = np.asarray(x, np.float64)
-    if x.size == 0:
-        return {"median": float("nan"), "p99": float("nan"), "max": float("nan")}
-    return {"median": float(np.median(x)), "p99": float(np.quantile(x, 0.99)),
-            "max": float(x.max())}
-
-
 def reference(cfg: CompareConfig, sc, P, L):
     """Exhaustive float64 solutions on `ref_n` lanes (None when the mesh is too large)."""
     F = sc.surface.faces.shape[0]
     if cfg.ref_n == 0 or F > MAX_REFERENCE_FACES:
-        _log(f"no exhaustive reference: {F} faces > {MAX_REFERENCE_FACES} or ref_n = 0")
+        log(f"no exhaustive reference: {F} faces > {MAX_REFERENCE_FACES} or ref_n = 0")
         return None
     rng = np.random.default_rng(cfg.seed + 1)
     idx = np.sort(rng.choice(len(P), min(cfg.ref_n, len(P)), replace=False))
@@ -184,8 +161,8 @@ def reference(cfg: CompareConfig, sc, P, L):
     M0 = np.asarray(ex.solution.start_point)
     d = np.linalg.norm(ex.all_points - M0[:, None], axis=-1)
     d = np.where(np.arange(ex.all_points.shape[1])[None] < ex.count[:, None], d, np.inf)
-    _log(f"exhaustive reference: {len(idx)} lanes in {time.perf_counter() - t:.1f} s, "
-         f"solutions per lane {np.bincount(ex.count).tolist()}")
+    log(f"exhaustive reference: {len(idx)} lanes in {time.perf_counter() - t:.1f} s, "
+        f"solutions per lane {np.bincount(ex.count).tolist()}")
     return {"idx": idx, "all_points": ex.all_points, "count": ex.count,
             "nearest_M0": np.argmin(d, 1), "seconds": time.perf_counter() - t}
 
@@ -196,14 +173,14 @@ def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps):
         Pd, Ld = np.asarray(P, dtype), np.asarray(L, dtype)
         for name in cfg.configs:
             method, opts = CONFIGS[name]
-            _log(f"[{dtype}] {name}: {cfg.n} lanes ...")
+            log(f"[{dtype}] {name}: {cfg.n} lanes ...")
             t0 = time.perf_counter()
             try:
                 sol, compile_s, steady = _timed(
                     lambda m=method, o=opts: solve(mesh, Pd, Ld, eta=cfg.eta, method=m, **o),
                     cfg.repeats)
             except ValueError as exc:  # e.g. a solver unavailable in this dtype
-                _log(f"  skipped: {exc}")
+                log(f"  skipped: {exc}")
                 continue
             err = _errors(sol, ref_mesh, P, L, cfg.eta, ref)
             it = np.asarray(sol.iterations)[np.asarray(sol.found)]
@@ -212,16 +189,16 @@ def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps):
                 "n": cfg.n, "found": err["found"],
                 "success": err.get("success"), "nearest_M0": err.get("nearest_M0"),
                 "spurious": err.get("spurious"),
-                "angle_error_rad": _stats(err["angle"]),
-                "position_error_m": _stats(err["position"]) if "position" in err else None,
+                "angle_error_rad": stats(err["angle"]),
+                "position_error_m": stats(err["position"]) if "position" in err else None,
                 "iterations": {"median": float(np.median(it)) if it.size else float("nan"),
                                "p99": float(np.quantile(it, 0.99)) if it.size else float("nan")},
                 "compile_s": compile_s, "seconds": steady, "solves_per_s": cfg.n / steady,
                 "status": sol.summary(), "tol": opts.get("tol", default_tol(dtype)),
             }
             results.append(row)
-            _log(f"  {row['solves_per_s']:.0f} solves/s, found {row['found']:.4f}, "
-                 f"compile {compile_s:.1f} s ({time.perf_counter() - t0:.0f} s)")
+            log(f"  {row['solves_per_s']:.0f} solves/s, found {row['found']:.4f}, "
+                f"compile {compile_s:.1f} s ({time.perf_counter() - t0:.0f} s)")
             if cfg.sweep:
                 sweeps.extend(_sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh,
                                      P, L))
@@ -238,8 +215,8 @@ def _sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh, P, L):
         err = _errors(sol, ref_mesh, P[idx], L[idx], cfg.eta, None)
         out.append({"config": name, "dtype": dtype, "tol": tol, "n": n,
                     "us_per_solve": 1e6 * steady / n, "found": err["found"],
-                    "angle_error_rad": _stats(err["angle"])})
-    _log(f"  sweep over {len(SWEEP_TOLS[dtype])} tolerances on {n} lanes done")
+                    "angle_error_rad": stats(err["angle"])})
+    log(f"  sweep over {len(SWEEP_TOLS[dtype])} tolerances on {n} lanes done")
     return out
 
 

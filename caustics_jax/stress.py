@@ -24,6 +24,8 @@ the planted point, and every solver must return that point or another valid solu
 Generators reuse `scenes.wavy_pool` / `scenes.flat_pool` (the surfaces) and
 `testing.planted_mesh_paths` (the planted faces and points); `plant` only adds what they
 do not offer: a prescribed point (vertex, edge), incidence angle, azimuth and distances.
+The geometry is the numpy oracle's (`testing.oracle`), as is the rounding bound of
+`refract` (`oracle.refraction_rounding_bound`) that the stress suite judges lanes by.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ import numpy as np
 from . import scenes
 from ._precision import precision
 from .mesh import GridInfo, SurfaceMesh
-from .testing import _refract_np, _unit, planted_mesh_paths
+from .testing import path_endpoints, planted_mesh_paths
+from .testing.oracle import NumpyMesh, barycentric_point, shading_normal, unit
 
 ETA = 1.333
 CRITICAL = float(np.arcsin(1 / ETA))  # critical angle on P's (water) side, rad
@@ -75,14 +78,11 @@ class StressCase:
 
     def triangles(self):
         """`(V, N)` `(n, 3, 3)` float64 of each lane's planted face."""
-        idx = self.faces[self.face]
-        return self.vertices[idx], self.normals[idx]
+        return NumpyMesh(self.vertices, self.faces, self.normals).triangles(self.face)
 
     @property
     def M(self) -> np.ndarray:
-        V, _ = self.triangles()
-        a, b = self.ab[:, :1], self.ab[:, 1:]
-        return V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
+        return barycentric_point(self.triangles()[0], self.ab)
 
     @property
     def n_faces(self) -> int:
@@ -96,13 +96,10 @@ def plant(V, N, ab, theta, h, d_P, d_L, eta: float = ETA):
     part along `h` projected onto the tangent plane of `n_s`; `w_L = refract(-w_P, -n_s,
     eta)` (MATH.md §1), `P = M + d_P w_P`, `L = M + d_L w_L`. Returns `(P, L)`.
     """
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n_s = _unit(N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0]))
-    tangent = _unit(h - np.sum(h * n_s, -1, keepdims=True) * n_s)
+    n_s = shading_normal(N, ab)
+    tangent = unit(h - np.sum(h * n_s, -1, keepdims=True) * n_s)
     w_P = -np.cos(theta)[:, None] * n_s + np.sin(theta)[:, None] * tangent
-    w_L = _unit(_refract_np(-w_P, -n_s, eta))
-    return M + np.asarray(d_P).reshape(-1, 1) * w_P, M + np.asarray(d_L).reshape(-1, 1) * w_L
+    return path_endpoints(barycentric_point(V, ab), n_s, w_P, d_P, d_L, eta)
 
 
 def _surface(sc) -> tuple:
@@ -121,11 +118,6 @@ def _flat(n_triangles=SMALL_TRIANGLES):
         return _surface(scenes.flat_pool(n_triangles, dtype="float64"))
 
 
-class _Mesh:  # what planted_mesh_paths reads
-    def __init__(self, vertices, faces, normals):
-        self.vertices, self.faces, self.normals = vertices, faces, normals
-
-
 def _case(name, surface, P, L, face, ab) -> StressCase:
     vertices, faces, normals, grid = surface
     return StressCase(category=name, vertices=vertices, faces=faces, normals=normals, grid=grid,
@@ -133,15 +125,16 @@ def _case(name, surface, P, L, face, ab) -> StressCase:
 
 
 def _planted(name, surface, n, seed, **kwargs) -> StressCase:
-    p = planted_mesh_paths(_Mesh(*surface[:3]), n, seed, eta=ETA, **kwargs)
+    p = planted_mesh_paths(NumpyMesh(*surface[:3]), n, seed, eta=ETA, **kwargs)
     return _case(name, surface, p.P, p.L, p.face, p.ab)
 
 
 def _replanted(name, surface, n, seed, theta, d_P=None, d_L=None) -> StressCase:
     """Faces and points of `planted_mesh_paths`, with new angles and distances."""
     rng = np.random.default_rng(seed + 1)
-    p = planted_mesh_paths(_Mesh(*surface[:3]), n, seed, eta=ETA)
-    V, N = surface[0][surface[1][p.face]], surface[2][surface[1][p.face]]
+    mesh = NumpyMesh(*surface[:3])
+    p = planted_mesh_paths(mesh, n, seed, eta=ETA)
+    V, N = mesh.triangles(p.face)
     d_P = rng.uniform(0.2, 0.9, n) if d_P is None else d_P
     d_L = rng.uniform(1.0, 4.0, n) if d_L is None else d_L
     P, L = plant(V, N, p.ab, theta, rng.normal(size=(n, 3)), d_P, d_L)
@@ -156,13 +149,14 @@ def _theta_for_elevation(elevation):
 def _vertex_edge(name, surface, n, seed, aligned: bool) -> StressCase:
     """Solutions at vertices (half) and on edges (half); a quarter at normal incidence."""
     rng = np.random.default_rng(seed + 1)
-    p = planted_mesh_paths(_Mesh(*surface[:3]), n, seed, eta=ETA)
+    mesh = NumpyMesh(*surface[:3])
+    p = planted_mesh_paths(mesh, n, seed, eta=ETA)
     k = rng.integers(0, 3, n)
     t = np.where(np.arange(n) % 2 == 0, 0.0, rng.uniform(0.05, 0.95, n))  # even lanes: a vertex
     a = np.where(k == 0, t, np.where(k == 1, 1 - t, 0.0))  # edge parametrisation of barycentric.py
     b = np.where(k == 0, 0.0, t)
     ab = np.stack([a, b], -1)
-    V, N = surface[0][surface[1][p.face]], surface[2][surface[1][p.face]]
+    V, N = mesh.triangles(p.face)
     theta = np.where(np.arange(n) % 4 == 1, 0.0, rng.uniform(0.0, np.radians(35), n))
     if aligned:  # tangential direction along x, y or the cell diagonal: the conic runs on edges
         axes = np.array([[1.0, 0, 0], [0, 1.0, 0], [1.0, 1.0, 0]])
@@ -183,7 +177,7 @@ def _sliver_surface(seed):
     for i in range(1, grid.nx, 2):
         w = 10.0 ** -rng.uniform(1, 7)
         Vg[:, i] = Vg[:, i - 1] + w * (Vg[:, i] - Vg[:, i - 1])
-        Ng[:, i] = _unit(Ng[:, i - 1] + w * (Ng[:, i] - Ng[:, i - 1]))
+        Ng[:, i] = unit(Ng[:, i - 1] + w * (Ng[:, i] - Ng[:, i - 1]))
     return Vg.reshape(-1, 3), faces, Ng.reshape(-1, 3), None
 
 
@@ -236,28 +230,3 @@ def stress_case(category: str, n: int = 256, seed: int = 0) -> StressCase:
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     return _make(category, n, seed)
-
-
-def stress_cases(n: int = 256, seed: int = 0, categories=CATEGORIES) -> dict[str, StressCase]:
-    """Every category (or those named), `n` paths each."""
-    return {c: stress_case(c, n, seed) for c in categories}
-
-
-def refraction_rounding_bound(mesh, face, ab, P, eta: float, dtype) -> np.ndarray:
-    """First-order rounding bound (rad) of `refract(-w_P, -n_s, eta)` in `dtype` at `(face, ab)`.
-
-    In GLSL `refract` (MATH.md §1) `k = 1 - eta^2 (1 - c^2)`, `c = w_P . n_s`; a rounding
-    `dc ~ eps` of `c` moves `k` by `2 eta^2 c dc` and `sqrt(k)` by `eta^2 c dc / sqrt(k)`,
-    so the refracted direction (and the signed sine `f`) carries an error of about
-    `eta^2 eps / sqrt(k)` that no solver can remove. It exceeds the float32 acceptance
-    tolerance (1e-5) within about 2e-4 of `k = 0`, i.e. near the critical angle.
-    `mesh` needs numpy-readable `vertices`, `faces`, `normals`; float64 evaluation.
-    """
-    V = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)[face]]
-    N = np.asarray(mesh.normals, np.float64)[np.asarray(mesh.faces)[face]]
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n_s = _unit(N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0]))
-    c = np.sum(_unit(np.asarray(P, np.float64) - M) * n_s, -1)
-    k = 1 - eta**2 * (1 - c**2)
-    return eta**2 * float(np.finfo(dtype).eps) / np.sqrt(np.maximum(k, np.finfo(np.float64).tiny))

@@ -9,7 +9,7 @@
 #
 # - **non-finite**: lanes with a NaN/Inf in any output (goal 0);
 # - **silent failures**: lanes reported FOUND whose `|residual| > tol`, or whose
-#   refraction-angle error (float64 re-evaluation, `testing.refraction_angle_error`, on
+#   refraction-angle error (float64 re-evaluation, `testing.oracle.refraction_angle_error`, on
 #   the data the solver saw: the float32 mesh and paths cast exactly to float64) exceeds
 #   `10 tol` (`f` is the sine of that angle, so `tol` bounds it; goal 0);
 # - found fraction, status counts, angle-error distribution, and per kernel its error
@@ -40,11 +40,11 @@ import numpy as np  # noqa: E402
 
 import caustics_jax as cj  # noqa: E402
 from caustics_jax import stress  # noqa: E402
-from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES, _NumpyMesh  # noqa: E402
+from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES  # noqa: E402
 from caustics_jax.conic import conic_value  # noqa: E402
 from caustics_jax.solvers import Status  # noqa: E402
 from caustics_jax.solvers.walk import default_tol  # noqa: E402
-from caustics_jax.testing import _refract_np, _unit, refraction_angle_error  # noqa: E402
+from caustics_jax.testing import oracle  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DTYPES = ("float32", "float64")
@@ -81,11 +81,9 @@ def _nonfinite(*arrays):
 
 # %% kernels
 def _path_frame(V, N, P, L, ab):
-    """`M`, `n_s`, `w_P` in float64 numpy (MATH.md §1), for the kernels' direct inputs."""
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n_t = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
-    return M, _unit(n_t), n_t, _unit(P - M)
+    """`M`, `n_s`, `n~`, `w_P` in float64 numpy (MATH.md §1), for the kernels' direct inputs."""
+    M, n_t = oracle.barycentric_point(V, ab), oracle.interpolated_normal(N, ab)
+    return M, oracle.unit(n_t), n_t, oracle.unit(P - M)
 
 
 @jax.jit
@@ -115,7 +113,7 @@ def run_kernels(case: stress.StressCase) -> dict:
     out = {}
     with cj.precision("float64"):
         D_ref = np.asarray(cj.autodiff_D(*(jnp.asarray(x) for x in (V, N, case.P, case.L, case.ab)), case.eta))
-        r_ref = _refract_np(I, Ns, case.eta)
+        r_ref = oracle.refract(I, Ns, case.eta)
         k64 = None
         for dtype in DTYPES:
             args = [jnp.asarray(x, dtype) for x in (V, N, case.P, case.L, case.ab, I, Ns, cos_i)]
@@ -178,8 +176,7 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
         with cj.precision(dtype):
             mesh = case.mesh(dtype)
             # The problem the solver saw, exactly in float64: judge it on that.
-            seen = _NumpyMesh(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces),
-                              np.asarray(mesh.normals, np.float64))
+            seen = oracle.NumpyMesh.from_mesh(mesh)
             P = np.asarray(case.P, dtype)
             L = np.asarray(case.L, dtype)
             row = {}
@@ -198,12 +195,13 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
                 tri, ab = np.asarray(sol.triangle), np.asarray(sol.barycentric, np.float64)
                 angle = np.full(len(found), np.nan)
                 P64, L64 = np.asarray(P[lanes], np.float64), np.asarray(L[lanes], np.float64)
-                angle[found] = refraction_angle_error(seen, tri[found], ab[found], P64[found], L64[found], case.eta)
+                angle[found] = oracle.refraction_angle_error(seen, tri[found], ab[found], P64[found], L64[found],
+                                                             case.eta)
                 residual = np.asarray(sol.residual, np.float64)
                 silent = found & ((np.abs(residual) > tol) | (angle > SILENT_ANGLE_FACTOR * tol))
                 # beyond what refract's own rounding near the critical angle explains
                 bound = np.zeros(len(found))
-                bound[found] = stress.refraction_rounding_bound(seen, tri[found], ab[found], P64[found],
+                bound[found] = oracle.refraction_rounding_bound(seen, tri[found], ab[found], P64[found],
                                                                 case.eta, dtype)
                 beyond = silent & ((np.abs(residual) > tol) | (angle > SILENT_ANGLE_FACTOR * (tol + bound)))
                 bad = _nonfinite(sol.point, sol.barycentric, sol.residual, sol.start_point)

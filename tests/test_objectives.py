@@ -15,7 +15,7 @@ from caustics_jax import (
     signed_sine_and_status,
     solve_quadratic,
 )
-from caustics_jax.testing import _refract_np, planted_paths
+from caustics_jax.testing import oracle, planted_paths
 
 DTYPES = [jnp.float32, jnp.float64]
 # Objective values at planted solutions (float64 M rounded to the dtype). Measured maxima
@@ -50,20 +50,15 @@ def test_every_objective_vanishes_at_planted_solutions(dtype, seed, eta):
 
 
 def _signed_sine_reference(V, N, P, L, ab, eta):
-    """Float64 numpy seed 001 eq. 19-21, written independently of the package."""
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
-    n_s = n / np.linalg.norm(n, axis=-1, keepdims=True)
-    w_P = (P - M) / np.linalg.norm(P - M, axis=-1, keepdims=True)
-    w_L = (L - M) / np.linalg.norm(L - M, axis=-1, keepdims=True)
-    c = np.cross(_refract_np(-w_P, -n_s, eta), w_L)
+    """Float64 numpy seed 001 eq. 19-21 on the oracle, independent of the package's kernels."""
+    M = oracle.barycentric_point(V, ab)
+    n_s = oracle.shading_normal(N, ab)
+    w_P, w_L = oracle.unit(P - M), oracle.unit(L - M)
+    c = np.cross(oracle.refract(-w_P, -n_s, eta), w_L)
     # tangent from the gradient of n~ . (PL x PM) w.r.t. (a, b), by central differences
     def g(ab_):
-        a_, b_ = ab_[:, :1], ab_[:, 1:]
-        M_ = V[:, 0] + a_ * (V[:, 1] - V[:, 0]) + b_ * (V[:, 2] - V[:, 0])
-        n_ = N[:, 0] + a_ * (N[:, 1] - N[:, 0]) + b_ * (N[:, 2] - N[:, 0])
-        return np.sum(n_ * np.cross(L - P, M_ - P), -1)
+        M_ = oracle.barycentric_point(V, ab_)
+        return np.sum(oracle.interpolated_normal(N, ab_) * np.cross(L - P, M_ - P), -1)
     h = 1e-6
     ga = (g(ab + [h, 0]) - g(ab - [h, 0])) / (2 * h)
     gb = (g(ab + [0, h]) - g(ab - [0, h])) / (2 * h)
@@ -73,10 +68,9 @@ def _signed_sine_reference(V, N, P, L, ab, eta):
 
 def _points_on_curve_near(p, coef, da):
     """Points of the conic at `a + da`, on the branch through the planted `ab`."""
-    A, B, C, D, E, F = np.moveaxis(np.asarray(coef), -1, 0)
     a = p.ab[:, 0] + da
-    b, valid = (np.asarray(x) for x in solve_quadratic(
-        jnp.asarray(B), jnp.asarray(C * a + E), jnp.asarray(A * a * a + D * a + F)))
+    q = oracle.conic_on_line(coef, np.stack([a, np.zeros_like(a)], -1), np.array([0.0, 1.0]))  # the line a = const
+    b, valid = (np.asarray(x) for x in solve_quadratic(*(jnp.asarray(x) for x in q)))
     pick = np.argmin(np.where(valid, np.abs(b - p.ab[:, 1:]), np.inf), -1)
     b_near = np.take_along_axis(b, pick[:, None], -1)[:, 0]
     ok = valid.any(-1) & (np.abs(b_near - p.ab[:, 1]) < 20 * abs(da))
@@ -128,10 +122,8 @@ def test_total_internal_reflection_is_reported_not_mistaken_for_a_root(dtype):
     P_tir = p.M + np.array([8.0, 0.0, -0.5])
     f, status = objectives_j(*_cast(p._replace(P=P_tir), dtype), p.eta)[0]
     f, status = np.asarray(f), np.asarray(status)
-    n = p.N[:, 0] + p.ab[:, :1] * (p.N[:, 1] - p.N[:, 0]) + p.ab[:, 1:] * (p.N[:, 2] - p.N[:, 0])
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    w_P = (P_tir - p.M) / np.linalg.norm(P_tir - p.M, axis=-1, keepdims=True)
-    k = 1 - p.eta**2 * (1 - np.sum(n * w_P, -1) ** 2)
+    cos_i = np.sum(oracle.shading_normal(p.N, p.ab) * oracle.unit(P_tir - p.M), -1)
+    k = oracle.refraction_discriminant(cos_i, p.eta)
     clear = np.abs(k) > 1e-3
     assert (k < -1e-3).mean() > 0.8
     np.testing.assert_array_equal(status[clear] == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, k[clear] < 0)

@@ -18,15 +18,15 @@ import pytest
 import caustics_jax as cj
 from caustics_jax import scenes, stress
 from caustics_jax.solvers import Status
-from caustics_jax.solvers.walk import default_tol
-from caustics_jax.testing import _unit, refraction_angle_error
+from caustics_jax.solvers import default_tol
+from caustics_jax.testing import oracle
 
 DTYPES = ["float32", "float64"]
 CATEGORIES = [c for c in stress.CATEGORIES if c != "large"]
 N = 64
 # A FOUND lane's angle error (float64 re-evaluation on the data the solver saw) may exceed
 # tol only by rounding: |f| <= tol bounds the sine of that angle, up to refract's own
-# rounding near the critical angle, `stress.refraction_rounding_bound`. The stress suite
+# rounding near the critical angle, `oracle.refraction_rounding_bound`. The stress suite
 # measured angle <= tol + 1.3 bound (near_tir, float32 walk, 256 lanes; every other
 # category within 1.0x tol); 10x either flags a wrong point.
 SILENT_FACTOR = 10.0
@@ -41,25 +41,18 @@ def _case(category):
     return stress.stress_case(category, N, seed=0)
 
 
-class _Seen:
-    """The mesh as the solver saw it (its dtype), exactly in float64."""
-
-    def __init__(self, mesh):
-        self.vertices = np.asarray(mesh.vertices, np.float64)
-        self.faces = np.asarray(mesh.faces)
-        self.normals = np.asarray(mesh.normals, np.float64)
-
-
 def _silent_and_nonfinite(case, mesh, P, L, sol, tol):
     found = np.asarray(sol.found)
     for name in ("point", "barycentric", "residual", "start_point"):
         assert np.all(np.isfinite(np.asarray(getattr(sol, name)))), name
     np.testing.assert_array_equal(found, np.asarray(sol.status) == Status.FOUND)
-    angle = refraction_angle_error(_Seen(mesh), np.asarray(sol.triangle)[found],
-                                   np.asarray(sol.barycentric, np.float64)[found],
-                                   np.asarray(P, np.float64)[found], np.asarray(L, np.float64)[found], case.eta)
+    seen = oracle.NumpyMesh.from_mesh(mesh)  # the mesh as the solver saw it, exactly in float64
+    angle = oracle.refraction_angle_error(seen, np.asarray(sol.triangle)[found],
+                                          np.asarray(sol.barycentric, np.float64)[found],
+                                          np.asarray(P, np.float64)[found], np.asarray(L, np.float64)[found],
+                                          case.eta)
     residual = np.abs(np.asarray(sol.residual, np.float64))[found]
-    bound = stress.refraction_rounding_bound(_Seen(mesh), np.asarray(sol.triangle)[found],
+    bound = oracle.refraction_rounding_bound(seen, np.asarray(sol.triangle)[found],
                                              np.asarray(sol.barycentric, np.float64)[found],
                                              np.asarray(P, np.float64)[found], case.eta, P.dtype)
     return np.nonzero(found)[0][(residual > tol) | (angle > SILENT_FACTOR * (tol + bound))]
@@ -93,9 +86,8 @@ def test_kernels_on_adversarial_paths_return_no_nan(dtype):
     V, Nv = (np.concatenate(x) for x in zip(*(c.triangles() for c in cases), strict=True))
     P, L, ab = (np.concatenate([getattr(c, k) for c in cases]) for k in ("P", "L", "ab"))
     M = np.concatenate([c.M for c in cases])
-    a, b = ab[:, :1], ab[:, 1:]
-    n_s = _unit(Nv[:, 0] + a * (Nv[:, 1] - Nv[:, 0]) + b * (Nv[:, 2] - Nv[:, 0]))
-    w_P = _unit(P - M)
+    n_s = oracle.shading_normal(Nv, ab)
+    w_P = oracle.unit(P - M)
     with cj.precision(dtype):
         args = [jnp.asarray(x, dtype) for x in (V, Nv, P, L, ab, -w_P, -n_s, np.sum(w_P * n_s, -1))]
         out = _kernels(*args, jnp.asarray(stress.ETA, dtype))

@@ -1,0 +1,35 @@
+"""What tests and experiments share: the numpy float64 oracle, planted paths, checks.
+
+- `oracle`: MATH.md transcribed once in numpy float64, independent of the JAX kernels
+  (`refract`, eq. 3, the shading normal, Fresnel, the refraction-angle error, ...).
+- `planted`: random triangles and refracted paths with a known solution, seeded.
+- `checks`: `assert_solution_sane`, the checks every solver test runs.
+"""
+
+from . import oracle as oracle
+from .checks import assert_solution_sane as assert_solution_sane
+from .oracle import NumpyMesh as NumpyMesh
+from .oracle import flat_interface_irradiance as flat_interface_irradiance
+from .oracle import refraction_angle_error as refraction_angle_error
+from .planted import PlantedMeshPaths as PlantedMeshPaths
+from .planted import PlantedPath as PlantedPath
+from .planted import partly_covered_floor as partly_covered_floor
+from .planted import path_endpoints as path_endpoints
+from .planted import planted_mesh_paths as planted_mesh_paths
+from .planted import planted_paths as planted_paths
+from .planted import random_triangles as random_triangles
+
+__all__ = [
+    "NumpyMesh",
+    "PlantedMeshPaths",
+    "PlantedPath",
+    "assert_solution_sane",
+    "flat_interface_irradiance",
+    "oracle",
+    "partly_covered_floor",
+    "path_endpoints",
+    "planted_mesh_paths",
+    "planted_paths",
+    "random_triangles",
+    "refraction_angle_error",
+]
