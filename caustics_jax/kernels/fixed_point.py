@@ -19,7 +19,6 @@ from jaxtyping import Array, Bool, Float, Int, UInt32
 
 from ._util import check
 
-INTEGER_BITS = 4
 FRACTION_BITS = 28
 SCALE = 2**FRACTION_BITS
 #: Largest representable value, (2^32 - 1) / 2^28, just below 16: the overflow bound.
