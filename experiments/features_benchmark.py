@@ -23,26 +23,23 @@
 # %%
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
 
 import jax
 
 jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built explicitly)
 
-import matplotlib  # noqa: E402
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from caustics_jax import features, scenes  # noqa: E402
 from caustics_jax.solvers import Status, solve  # noqa: E402
 from caustics_jax.testing import partly_covered_floor  # noqa: E402
 from caustics_jax.transport import irradiance  # noqa: E402
+from experiments.common import ROOT, use_agg, write_json  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+use_agg()
+import matplotlib.pyplot as plt  # noqa: E402
+
 FIG = ROOT / "figures" / "features_benchmark.png"
 N_TRIANGLES = 8192  # seed 001 Fig. 10's range, the `make demo` pool
 N_SIDE = 128  # 16,384 receivers
@@ -136,8 +133,7 @@ out = dict(
     repeats=REPEATS, lanes=N_SIDE**2, triangles=N_TRIANGLES,
     rows=rows,
 )
-FIG.parent.mkdir(exist_ok=True)
-FIG.with_suffix(".json").write_text(json.dumps(out, indent=2))
+write_json(FIG.with_suffix(".json"), out)
 
 print()
 print("| scene | dtype | found / no crossing | solves/s general | specialised | x | \"auto\" | irradiance/s general "

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from pathlib import Path
 
 import jax
 
@@ -51,11 +50,12 @@ from caustics_jax.transport import (  # noqa: E402
     triangle_area,
 )
 from caustics_jax.transport.photon_differentials import light_view_texels  # noqa: E402
+from experiments.common import ROOT, parse_args, stats, use_agg, write_json  # noqa: E402
 
 LIGHT = np.array([0.4, -0.3, 3.0])
 UP = np.array([0.0, 0.0, 1.0])
 ETA = 1.333
-FIG = Path("figures")
+FIG = ROOT / "figures"
 
 
 def walk_map(mesh, receiver, k=3, dtype=jnp.float64):
@@ -238,8 +238,7 @@ def same_t_error(quick):
         good = found[c] & found[r] & found[u] & np.asarray(ok[c] & ok_x)
 
         def stat(num, den, good=good):
-            x = np.abs(np.asarray(num)[good] / np.asarray(den)[good] - 1)
-            return dict(median=float(np.median(x)), p99=float(np.percentile(x, 99)), max=float(np.max(x)))
+            return stats(np.abs(np.asarray(num)[good] / np.asarray(den)[good] - 1))
 
         ex = np.asarray(exact)
         out.append(dict(res=res, texel_m=tx.du,
@@ -252,9 +251,7 @@ def same_t_error(quick):
 
 # %%
 def plot(wavy, maps, post, path_main, path_post):
-    import matplotlib
-
-    matplotlib.use("Agg")
+    use_agg()
     import matplotlib.pyplot as plt
 
     rec = ReceiverGrid(**wavy["receiver"])
@@ -337,7 +334,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer photons and texels (about two minutes)")
     ap.add_argument("--replot", action="store_true", help="redraw the figures from the saved JSON and maps")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv)
     if args.replot:
         out = json.loads((FIG / "irradiance_agreement.json").read_text())
         maps = dict(np.load(FIG / "irradiance_agreement_maps.npz"))
@@ -368,10 +365,9 @@ def main(argv=None):
               f"{r['same_t_per_neighbour_times_a']['median']:.3f}, "
               f"without a {r['same_t_per_neighbour']['median']:.3f}, "
               f"exact triangle vs Jacobian {r['exact_triangle_vs_jacobian']['median']:.1e}")
-    FIG.mkdir(exist_ok=True)
     out = dict(flat=flat, wavy=wavy, default_wavy=default, postfocal=post, same_t=same_t,
                seconds=time.perf_counter() - t0, quick=args.quick)
-    (FIG / "irradiance_agreement.json").write_text(json.dumps(out, indent=1))
+    write_json(FIG / "irradiance_agreement.json", out)
     np.savez_compressed(FIG / "irradiance_agreement_maps.npz", **{k: v.astype(np.float32) for k, v in maps.items()})
     plot(wavy, maps, post, FIG / "irradiance_agreement.png", FIG / "irradiance_postfocal.png")
     print(f"wrote figures/irradiance_agreement.png, irradiance_postfocal.png, .json ({out['seconds']:.0f} s)")

@@ -15,19 +15,12 @@
 # %%
 from __future__ import annotations
 
-import json
-import pathlib
-
 import jax
 import jax.numpy as jnp
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from caustics_jax import fresnel_reflectance, refract  # noqa: E402
-from caustics_jax.kernels import (  # noqa: E402
+from caustics_jax import fresnel_reflectance, refract
+from caustics_jax.kernels import (
     fixed_point_accumulate,
     fixed_point_decode,
     fresnel_reflect_approx,
@@ -35,11 +28,14 @@ from caustics_jax.kernels import (  # noqa: E402
     ray_plane_intersection,
     schlick_f0,
 )
-from caustics_jax.kernels.fixed_point import MAX_VALUE, RESOLUTION  # noqa: E402
+from caustics_jax.kernels.fixed_point import MAX_VALUE, RESOLUTION
+from experiments.common import figures_dir, use_agg, write_json
+
+use_agg()
+import matplotlib.pyplot as plt  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-FIG = ROOT / "figures"
+FIG = figures_dir()
 ETA_WATER = 1.333
 results: dict = {}
 
@@ -265,7 +261,7 @@ results["fixed_point"] = {
 }
 
 # %%
-(FIG / "kernel_approximations.json").write_text(json.dumps(results, indent=2))
+write_json(FIG / "kernel_approximations.json", results)
 print("Schlick (eq. 14) vs exact Fresnel, air->water:")
 f = results["fresnel_schlick"]
 print(

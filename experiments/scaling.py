@@ -19,22 +19,19 @@ from __future__ import annotations
 
 import argparse
 import inspect
-import json
 import pathlib
-import sys
 import time
 
 import jax
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+import caustics_jax as cj
+from caustics_jax.compare import CONFIGS
+from experiments.common import ROOT, log, parse_args, use_agg, write_json
+
+use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
-import caustics_jax as cj  # noqa: E402
-from caustics_jax.compare import CONFIGS  # noqa: E402
-
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 # 4,050 / 16,020 / 64,082 / 250,632 / 1,001,112 faces: each just under a power of two (the
 # solvers pad meshes to power-of-two buckets)
 SIZES = (4_000, 16_000, 64_000, 250_000, 1_000_000)
@@ -48,10 +45,6 @@ SOLVERS = {
 DTYPES = ("float32", "float64")
 # The general solver path, not a scene-feature specialisation (issue 7 part 2, where present).
 GENERAL = {"features": None} if "features" in inspect.signature(cj.solve).parameters else {}
-
-
-def _log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 def _median_time(fn, repeats):
@@ -93,8 +86,8 @@ def run(sizes=SIZES, dtypes=DTYPES, repeats=REPEATS) -> dict:
                            "iterations_mean_found": float(np.asarray(sol.iterations)[found].mean()),
                            "build_s": build, "wall_incl_compile_s": time.perf_counter() - t}
                     rows.append(row)
-                    _log(f"{F:>9,} {dtype} {name:24s} {row['us_per_solve']:8.2f} us/solve  found {row['found']:.4f}  "
-                         f"crossed {row['crossed_mean_found']:.1f}  ({row['wall_incl_compile_s']:.0f} s)")
+                    log(f"{F:>9,} {dtype} {name:24s} {row['us_per_solve']:8.2f} us/solve  found {row['found']:.4f}  "
+                        f"crossed {row['crossed_mean_found']:.1f}  ({row['wall_incl_compile_s']:.0f} s)")
     return {"rows": rows, "fits": fits(rows), "lanes": N_RECEIVERS**2, "repeats": repeats,
             "platform": jax.default_backend(), "devices": [str(d) for d in jax.devices()]}
 
@@ -174,13 +167,12 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description="walk vs Newton against tessellation")
     ap.add_argument("--quick", action="store_true", help="4k-262k triangles, float32 only")
     ap.add_argument("--out", default=str(ROOT / "figures"))
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv)
     t0 = time.perf_counter()
     result = run(SIZES[:4], ("float32",)) if args.quick else run()
     result["seconds"] = time.perf_counter() - t0
     out = pathlib.Path(args.out)
-    out.mkdir(exist_ok=True)
-    (out / "scaling.json").write_text(json.dumps(result, indent=1))
+    write_json(out / "scaling.json", result)
     plot(result, out / "scaling.png")
     print(f"{'triangles':>10s} {'dtype':8s} {'solver':24s} {'us/solve':>9s} {'start us':>9s} {'found':>7s} "
           f"{'crossed':>8s}")

@@ -27,26 +27,24 @@ import argparse
 import inspect
 import json
 import pathlib
-import sys
 import time
 
 import jax
 import jax.numpy as jnp
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+import caustics_jax as cj
+from caustics_jax import stress
+from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES
+from caustics_jax.conic import conic_value
+from caustics_jax.solvers import Status
+from caustics_jax.solvers.walk import default_tol
+from caustics_jax.testing import oracle
+from experiments.common import ROOT, log, parse_args, stats, use_agg, write_json
+
+use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
-import caustics_jax as cj  # noqa: E402
-from caustics_jax import stress  # noqa: E402
-from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES  # noqa: E402
-from caustics_jax.conic import conic_value  # noqa: E402
-from caustics_jax.solvers import Status  # noqa: E402
-from caustics_jax.solvers.walk import default_tol  # noqa: E402
-from caustics_jax.testing import oracle  # noqa: E402
-
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 DTYPES = ("float32", "float64")
 KERNELS = ("refract", "fresnel", "conic_coefficients", "conic_tangent", "edge_intersections",
            "signed_sine", "ray_differential_D")
@@ -57,17 +55,13 @@ SILENT_ANGLE_FACTOR = 10.0
 GENERAL = {"features": None} if "features" in inspect.signature(cj.solve).parameters else {}
 
 
-def _log(msg):
-    print(msg, file=sys.stderr, flush=True)
+def _number(x) -> float:
+    """A statistic as a float: NaN where there was none (NaN in memory, null in the JSON)."""
+    return float("nan") if x is None else float(x)
 
 
-def _stats(x):
-    x = np.asarray(x, np.float64)
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return {"median": None, "p99": None, "max": None, "n": 0}
-    return {"median": float(np.median(x)), "p99": float(np.quantile(x, 0.99)), "max": float(x.max()),
-            "n": int(x.size)}
+def _sci(x) -> str:
+    return f"{_number(x):.1e}" if np.isfinite(_number(x)) else "-"
 
 
 def _nonfinite(*arrays):
@@ -128,12 +122,12 @@ def run_kernels(case: stress.StressCase) -> dict:
             for name in KERNELS:
                 row[name] = {"nonfinite": int(_nonfinite(*jax.tree.leaves(k[name])).sum())}
             f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
-            row["refract"]["error"] = _stats(np.max(np.abs(f64(k["refract"]) - r_ref), -1))
+            row["refract"]["error"] = stats(np.max(np.abs(f64(k["refract"]) - r_ref), -1))
             row["refract"]["reference"] = "independent float64 numpy refract"
             coef = f64(k["conic_coefficients"])
             # conic at the planted point: n~ . (PL x PM) = 0 on a refracted path (eq. 9-12)
             res = np.abs(np.asarray(conic_value(jnp.asarray(coef), jnp.asarray(case.ab)))) / truth_scale
-            row["conic_coefficients"]["error"] = _stats(res)
+            row["conic_coefficients"]["error"] = stats(res)
             row["conic_coefficients"]["reference"] = "conic value at planted M / (|n~||PL||PM|), truth 0"
             t, valid = f64(k["edge_intersections"][0]), k["edge_intersections"][1]
             edge_ab = np.asarray(cj.edge_barycentric(jnp.broadcast_to(jnp.arange(3)[:, None], t.shape),
@@ -141,28 +135,28 @@ def run_kernels(case: stress.StressCase) -> dict:
             c64 = np.asarray(k64["conic_coefficients"])  # exact conic of the float64 data
             val = np.asarray(conic_value(jnp.asarray(c64)[:, None, None], jnp.asarray(edge_ab)))
             scale = np.max(np.abs(c64), -1)[:, None, None]
-            row["edge_intersections"]["error"] = _stats((np.abs(val) / np.where(scale > 0, scale, 1))[valid])
+            row["edge_intersections"]["error"] = stats((np.abs(val) / np.where(scale > 0, scale, 1))[valid])
             row["edge_intersections"]["reference"] = "float64 conic at the returned roots / max|coef|, truth 0"
             f_plane, _, st = k["signed_sine"]
             ok = st == cj.ObjectiveStatus.OK
-            row["signed_sine"]["error"] = _stats(np.abs(f64(f_plane))[ok])
+            row["signed_sine"]["error"] = stats(np.abs(f64(f_plane))[ok])
             row["signed_sine"]["reference"] = "|f| at planted M, truth 0"
             row["signed_sine"]["not_ok"] = int((~ok).sum())
             D, D_ok = f64(k["ray_differential_D"][0]), k["ray_differential_D"][1]
             rel = np.abs(D - D_ref) / np.abs(D_ref)
-            row["ray_differential_D"]["error"] = _stats(rel[D_ok])
+            row["ray_differential_D"]["error"] = stats(rel[D_ok])
             row["ray_differential_D"]["reference"] = "autodiff_D, float64"
             row["ray_differential_D"]["valid"] = int(D_ok.sum())
             if dtype == "float32":
-                row["fresnel"]["error"] = _stats(np.abs(f64(k["fresnel"]) - k64["fresnel"]))
+                row["fresnel"]["error"] = stats(np.abs(f64(k["fresnel"]) - k64["fresnel"]))
                 tan64 = k64["conic_tangent"]
                 # relative to the coefficients' scale: the tangent itself vanishes at a
                 # singular point (normal incidence at a vertex, P, L and n~ aligned)
-                row["conic_tangent"]["error"] = _stats(
+                row["conic_tangent"]["error"] = stats(
                     np.linalg.norm(f64(k["conic_tangent"]) - tan64, axis=-1)
                     / np.maximum(np.max(np.abs(k64["conic_coefficients"]), -1), 1e-300))
             else:
-                row["fresnel"]["error"] = row["conic_tangent"]["error"] = _stats([])
+                row["fresnel"]["error"] = row["conic_tangent"]["error"] = stats([])
             row["fresnel"]["reference"] = "float64 kernel"
             row["conic_tangent"]["reference"] = "float64 kernel, / max|coef|"
             rows[dtype] = row
@@ -212,7 +206,7 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
                     "silent_rounding_bound_rad": bound[silent].tolist()[:20],
                     "silent_lanes": np.nonzero(silent)[0].tolist()[:20],
                     "nonfinite": int(bad.sum()), "status": sol.summary(), "tol": tol,
-                    "angle_error_rad": _stats(angle[found]),
+                    "angle_error_rad": stats(angle[found]),
                     "crossed_mean": float(np.mean(np.asarray(sol.crossed)[found])) if found.any() else None,
                     "seconds": seconds,
                 }
@@ -229,7 +223,7 @@ def run(n: int = 256, n_exhaustive: int = 64, categories=stress.CATEGORIES, seed
         kern = run_kernels(case)
         solv = run_solvers(case, n_exhaustive)
         result["categories"][c] = {"n_faces": case.n_faces, "kernels": kern, "solvers": solv}
-        _log(f"{c}: {time.perf_counter() - t0:.1f} s")
+        log(f"{c}: {time.perf_counter() - t0:.1f} s")
     return result
 
 
@@ -268,14 +262,12 @@ def table(result) -> str:
         for dtype in DTYPES:
             k, s = r["kernels"][dtype], r["solvers"][dtype]
             knan = sum(v["nonfinite"] for v in k.values())
-            fmax = k["signed_sine"]["error"]["max"]
-            cells = [c, dtype, str(knan), f"{fmax:.1e}" if fmax is not None else "-"]
+            cells = [c, dtype, str(knan), _sci(k["signed_sine"]["error"]["max"])]
             for name in ("walk", "newton"):
                 v = s[name]
-                amax = v["angle_error_rad"]["max"]
                 silent = str(v["silent"]) + (f" ({v['silent_beyond_rounding_bound']} beyond)" if v["silent"] else "")
                 cells += [f"{v['found']}/{v['n']}", silent, str(v["nonfinite"]), _short(v["status"]),
-                          f"{amax:.1e}" if amax is not None else "-"]
+                          _sci(v["angle_error_rad"]["max"])]
             if "exhaustive" in s:
                 v = s["exhaustive"]
                 cells.append(f"{v['found']}/{v['n']} / {v['silent']} / {v['nonfinite']}")
@@ -292,9 +284,8 @@ def kernel_table(result) -> str:
             k = r["kernels"][dtype]
             cells = []
             for name in KERNELS:
-                e = k[name]["error"]["max"]
-                cells.append(("-" if e is None else f"{e:.1e}") + (f" ({k[name]['nonfinite']} NaN)"
-                                                                  if k[name]["nonfinite"] else ""))
+                cells.append(_sci(k[name]["error"]["max"]) + (f" ({k[name]['nonfinite']} NaN)"
+                                                               if k[name]["nonfinite"] else ""))
             lines.append(f"| {c} | {dtype} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -313,8 +304,8 @@ def plot(result, path):
             s = result["categories"][c]["solvers"][dtype].get(name)
             frac.append(np.nan if s is None else s["found"] / s["n"])
             e = None if s is None else s["angle_error_rad"]
-            amax.append(np.nan if not e or e["max"] is None else max(e["max"], 1e-17))
-            a99.append(np.nan if not e or e["p99"] is None else max(e["p99"], 1e-17))
+            amax.append(np.nan if not e else max(_number(e["max"]), 1e-17))
+            a99.append(np.nan if not e else max(_number(e["p99"]), 1e-17))
         face = color if dtype == "float64" else "white"
         axes[0].scatter(frac, y + off, color=color, marker=marker, facecolor=face, label=f"{name} {dtype}")
         axes[1].scatter(amax, y + off, color=color, marker=marker, facecolor=face, label=f"{name} {dtype} (max)")
@@ -351,7 +342,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="64 paths, 16 exhaustive lanes, no `large`")
     ap.add_argument("--out", default=str(ROOT / "figures"))
     ap.add_argument("--replot", action="store_true", help="redraw the figure from stability.json")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv)
     t0 = time.perf_counter()
     if args.replot:  # figure only, from the JSON of an earlier run
         result = json.loads((pathlib.Path(args.out) / "stability.json").read_text())
@@ -364,8 +355,7 @@ def main(argv=None):
     result["totals"] = totals(result)
     result["seconds"] = time.perf_counter() - t0
     out = pathlib.Path(args.out)
-    out.mkdir(exist_ok=True)
-    (out / "stability.json").write_text(json.dumps(result, indent=1))
+    write_json(out / "stability.json", result)
     plot(result, out / "stability.png")
     print(table(result))
     print()

@@ -18,20 +18,18 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import jax
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+from caustics_jax.barycentric import barycentric_point
+from caustics_jax.scenes import lagoon, wavy_pool
+from caustics_jax.start_points import build_bvh, start_points
+from experiments.common import ROOT, use_agg, write_json
+
+use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
-from caustics_jax.barycentric import barycentric_point  # noqa: E402
-from caustics_jax.scenes import lagoon, wavy_pool  # noqa: E402
-from caustics_jax.start_points import build_bvh, start_points  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
 FIG = ROOT / "figures" / "start_point_throughput.png"
 SIZES = [100, 1_000, 4_000, 16_000, 62_000, 117_000, 250_000, 1_000_000]
 N_SEGMENTS = 128 * 128  # receivers on the pool floor
@@ -208,6 +206,5 @@ if __name__ == "__main__":
     meta = dict(segments=N_SEGMENTS, dtype=DTYPE, repeats=REPEATS, device=str(jax.devices()[0]),
                 jax=jax.__version__, lights=LIGHTS, load_avg_start=load_start,
                 load_avg_end=os.getloadavg())  # fmt: skip
-    FIG.with_suffix(".json").write_text(json.dumps(dict(meta=meta, rows=rows, build_1m=mem),
-                                                   indent=1))  # fmt: skip
+    write_json(FIG.with_suffix(".json"), dict(meta=meta, rows=rows, build_1m=mem))
     print(f"wrote {FIG} and {FIG.with_suffix('.json')}")

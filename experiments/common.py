@@ -1,0 +1,75 @@
+"""What every experiment shares: the figures folder, the plotting backend, JSON output,
+progress lines, error statistics, and command-line parsing that survives Jupyter.
+
+Experiments run headless as modules from the repository root
+(`python -m experiments.stability`) or open as notebooks (jupytext `# %%` cells) with the
+repository root on `sys.path`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pathlib
+import sys
+
+import numpy as np
+
+from caustics_jax.reporting import log as log
+from caustics_jax.reporting import stats as stats
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def figures_dir() -> pathlib.Path:
+    """`<repository>/figures`, created if missing: where figures and their JSON go."""
+    path = ROOT / "figures"
+    path.mkdir(exist_ok=True)
+    return path
+
+
+def in_ipython() -> bool:
+    """True inside an IPython shell or Jupyter kernel."""
+    ipython = sys.modules.get("IPython")
+    return ipython is not None and ipython.get_ipython() is not None
+
+
+def use_agg() -> None:
+    """Draw off-screen with matplotlib's Agg backend when run as a script; inside IPython or
+    Jupyter keep the kernel's backend, so figures still show inline."""
+    if not in_ipython():
+        import matplotlib
+
+        matplotlib.use("Agg")
+
+
+def parse_args(parser: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
+    """`parser.parse_args(argv)`, strict on the command line; inside IPython or Jupyter,
+    whose `sys.argv` holds the kernel's own flags (`-f kernel.json`), the defaults."""
+    if argv is None and in_ipython():
+        argv = []
+    return parser.parse_args(argv)
+
+
+def _json_safe(x):
+    """`x` with numpy scalars and arrays as Python numbers and lists, NaN and inf as None."""
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _json_safe(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def write_json(path, obj) -> pathlib.Path:
+    """Write `obj` as strict JSON (NaN and inf become null), creating the folder."""
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_json_safe(obj), indent=1, allow_nan=False))
+    return path
