@@ -38,3 +38,14 @@ def check_float_dtype(dtype) -> jnp.dtype:
     if dtype not in (jnp.dtype("float32"), jnp.dtype("float64")):
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
     return dtype
+
+
+def default_float_dtype(like, dtype=None) -> jnp.dtype:
+    """The float dtype of a new array: `dtype` when given (validated), float32 when `like`
+    is float32, else float64 when x64 is on and float32 otherwise."""
+    if dtype is not None:
+        return check_float_dtype(dtype)
+    in_dtype = getattr(like, "dtype", None)
+    if in_dtype is not None and jnp.dtype(in_dtype) == jnp.dtype("float32"):
+        return jnp.dtype("float32")
+    return jnp.dtype("float64") if jax.config.jax_enable_x64 else jnp.dtype("float32")

@@ -19,6 +19,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from .geometry import dot
+
 
 def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> Float[Array, "*batch 2"]:
     """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (table above)."""
@@ -41,6 +43,23 @@ def barycentric_point(V: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"
     """World point `V0 + a (V1 - V0) + b (V2 - V0)` (seed 001 eq. 3)."""
     a, b = ab[..., 0:1], ab[..., 1:2]
     return V[..., 0, :] + a * (V[..., 1, :] - V[..., 0, :]) + b * (V[..., 2, :] - V[..., 0, :])
+
+
+def barycentric_coordinates(E1: Float[Array, "*batch 3"], E2: Float[Array, "*batch 3"],
+                            x: Float[Array, "*batch 3"]) -> Float[Array, "*batch 2"]:
+    """`(a, b)` with `x = a E1 + b E2` (seed 001 eq. 3 solved for `a, b`, `x = M - V0`),
+    least squares (the 2x2 Gram system).
+
+    For `x` in the triangle's plane this is exact; `det G = |E1 x E2|^2` (Lagrange's
+    identity) is evaluated from the cross product, without the cancellation of
+    `g11 g22 - g12^2` on thin triangles. Returns zeros where the triangle is degenerate.
+    """
+    g11, g12, g22 = dot(E1, E1), dot(E1, E2), dot(E2, E2)
+    r1, r2 = dot(E1, x), dot(E2, x)
+    det = dot(jnp.cross(E1, E2), jnp.cross(E1, E2))
+    ok = det > 0
+    inv = jnp.where(ok, 1 / jnp.where(ok, det, 1), 0)
+    return jnp.stack([(g22 * r1 - g12 * r2) * inv, (g11 * r2 - g12 * r1) * inv], -1)
 
 
 def interpolated_normal(N: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"]):

@@ -13,15 +13,14 @@ Flags and what `solve` / `irradiance` (with `features="auto"`) do with them:
 - `flat`: vertices coplanar, every vertex and face normal equal to the plane normal,
   faces tiling their convex hull. The walk's points come in closed form on the line of
   seed 001 eq. 1-2 (`solvers/flat.py`).
-- `constant_normals`: `n0 = n1 = n2` in every face, so each conic is a line (MATH.md §2).
-  Recorded only: the walk's edge quadratic degenerates to a linear one by itself.
-- `grid`: `mesh.grid` is set (regular heightfield). Start points by the grid DDA, which
-  the general path also uses (`start_points(method="auto")`).
-- `directional`: every light of a `Lights` is directional. Recorded only: the segment
-  end `P + far d` is a finite point, so a plane-wave closed form would change results.
 - `compact_lanes` (always True from `features()`): lanes whose segment cannot reach the
   surface skip the start-point search, lanes without a start point skip the solver,
   and `irradiance` computes `D` only on found lanes.
+
+Flags that were recorded but changed nothing were removed: constant normals imply a flat
+surface on a connected mesh (shared vertices share their normal), a regular grid is
+already read from `mesh.grid` by the start points, and a directional light is a far
+point light to every solver.
 
 docs/features.md has the measured identical-output evidence and the speed-ups.
 """
@@ -48,18 +47,11 @@ class SceneFeatures(NamedTuple):
             tile their convex hull, so the refraction point is found in closed form on the
             line of seed 001 eq. 1-2 and the straight path from `M0` to it never crosses a
             boundary edge.
-        constant_normals: every face has three equal vertex normals (each coplanarity
-            conic degenerates to a line, MATH.md §2). Implied by `flat`.
-        grid: the surface is a regular heightfield grid (`mesh.grid`).
-        directional: every light is directional (only known from a `Lights`).
         compact_lanes: compact batches to the lanes that need the start-point search, the
             solver and the D factor, and scatter the results back.
     """
 
     flat: bool = False
-    constant_normals: bool = False
-    grid: bool = False
-    directional: bool = False
     compact_lanes: bool = False
 
 
@@ -72,13 +64,14 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
     Args:
         mesh: the refractive surface.
         lights_or_L: `None`, a `caustics_jax.scenes.Lights`, or light positions `(3,)` /
-            `(N, 3)` (point lights: `directional` is False).
+            `(N, 3)`; validated, but no property of the lights changes what the solvers
+            skip today (a directional light is a far point light to them).
 
     Raises `ValueError` for anything else, or for non-finite light positions.
     """
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
-    directional = _directional(lights_or_L)
+    _check_lights(lights_or_L)
     eps = float(np.finfo(np.dtype(mesh.dtype)).eps)
     N_unit = np.asarray(mesh.normals)  # unit: SurfaceMesh normalises them in float64
     F = np.asarray(mesh.faces)
@@ -95,20 +88,17 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
         flat=constant_normals and _is_flat(np.asarray(mesh.vertices, np.float64),
                                            N_unit.astype(np.float64), F,
                                            np.asarray(mesh.face_normals, np.float64), eps),
-        constant_normals=constant_normals,
-        grid=mesh.grid is not None,
-        directional=directional,
         compact_lanes=True,
     )
 
 
-def _directional(lights_or_L) -> bool:
+def _check_lights(lights_or_L) -> None:
     if lights_or_L is None:
-        return False
+        return
     from .scenes import Lights
 
     if isinstance(lights_or_L, Lights):
-        return bool(lights_or_L.directional) and all(lights_or_L.directional)
+        return
     try:
         L = np.asarray(lights_or_L, np.float64)
     except (TypeError, ValueError) as exc:
@@ -117,7 +107,6 @@ def _directional(lights_or_L) -> bool:
         raise ValueError(f"lights_or_L must be a Lights or have shape (3,) or (N, 3), got {L.shape}")
     if not np.all(np.isfinite(L)):
         raise ValueError("lights_or_L has NaN or Inf coordinates")
-    return False
 
 
 def _is_flat(V, N_unit, F, N_face, eps) -> bool:
@@ -146,15 +135,6 @@ def _is_flat(V, N_unit, F, N_face, eps) -> bool:
     except Exception:  # noqa: BLE001  (qhull: all points on a line, a degenerate mesh)
         return False
     return bool(abs(area - hull) <= 1e-9 * hull)
-
-
-def resolve(features_arg, mesh: SurfaceMesh) -> SceneFeatures | None:
-    """The `features=` argument of `solve` / `irradiance`: `"auto"` analyses `mesh` here,
-    `None` means the general path, a `SceneFeatures` (from `features(mesh)`) is used as is."""
-    check(features_arg)
-    if features_arg is None or isinstance(features_arg, SceneFeatures):
-        return features_arg
-    return features(mesh)
 
 
 def check(features_arg) -> None:

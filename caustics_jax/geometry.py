@@ -64,6 +64,11 @@ def refract(
     return jnp.where(transmits, out, jnp.zeros_like(out))
 
 
+def safe_div(x, y, ok):
+    """`x / y` where `ok`, 0 elsewhere, with finite values and gradients (double where)."""
+    return jnp.where(ok, x / jnp.where(ok, y, 1), 0)
+
+
 def _safe_sqrt(x):
     """sqrt of `max(x, 0)` whose gradient stays finite at and below zero."""
     positive = x > 0

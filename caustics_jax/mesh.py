@@ -16,12 +16,11 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._precision import check_float_dtype
+from ._precision import check_float_dtype, default_float_dtype
 from .barycentric import edge_barycentric, edge_param_from_vertex_order
 
 _MAX_NAMED = 10  # how many offending indices an error message lists
@@ -132,7 +131,7 @@ class SurfaceMesh(eqx.Module):
         N = N / np.linalg.norm(N, axis=-1, keepdims=True)
         if grid is not None:
             _check_grid(grid, V64, F)
-        dtype = _float_dtype(vertices, dtype)
+        dtype = default_float_dtype(vertices, dtype)
         return cls(
             vertices=jnp.asarray(V64, dtype=dtype),
             faces=jnp.asarray(F, dtype=jnp.int32),
@@ -197,7 +196,7 @@ class SurfaceMesh(eqx.Module):
         if normals is not None:
             normals = np.asarray(normals).reshape(-1, 3)
         return cls.from_arrays(
-            V, grid.faces(), normals, grid=grid, dtype=_float_dtype(heights, dtype), **kwargs
+            V, grid.faces(), normals, grid=grid, dtype=default_float_dtype(heights, dtype), **kwargs
         )
 
     @property
@@ -263,15 +262,6 @@ def _name(idx, limit: int = _MAX_NAMED) -> str:
     idx = np.unique(np.asarray(idx).ravel())
     shown = ", ".join(str(int(i)) for i in idx[:limit])
     return f"[{shown}{', ...' if len(idx) > limit else ''}] ({len(idx)} in all)"
-
-
-def _float_dtype(like, dtype):
-    if dtype is not None:
-        return check_float_dtype(dtype)
-    in_dtype = getattr(like, "dtype", None)
-    if in_dtype is not None and jnp.dtype(in_dtype) == jnp.dtype("float32"):
-        return jnp.dtype("float32")
-    return jnp.dtype("float64") if jax.config.jax_enable_x64 else jnp.dtype("float32")
 
 
 def _validate_geometry(vertices, faces):

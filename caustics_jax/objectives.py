@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
@@ -23,6 +24,7 @@ class ObjectiveStatus(enum.IntEnum):
     OK = 0
     TOTAL_INTERNAL_REFLECTION = 1  # refract(-w_P, -n_s, eta) is the zero vector
     DEGENERATE = 2  # M coincides with P or L, or the interpolated normal vanishes
+    BACKWARD = 3  # the refracted ray points away from L (only `bracket_objective` reports it)
 
 
 def path_vectors(V, N, P, L, ab):
@@ -161,3 +163,29 @@ def angle_difference_residual(V, N, P, L, ab, eta) -> Float[Array, "*batch 2"]:
     theta_l, phi_l = _spherical_angles(w_L, n_s)
     dphi = jnp.remainder(phi_r - phi_l + jnp.pi, 2 * jnp.pi) - jnp.pi
     return jnp.stack([theta_r - theta_l, jnp.sin(theta_l) * dphi], -1)
+
+
+def bracket_objective(V, N, P, L, ab, eta):
+    """`(f, status, g)` at points `ab` `(k, 2)` of one triangle: what the solvers bracket.
+
+    - `f`: the signed sine (seed 001 eq. 19-21) in the "plane" orientation, continuous
+      along the curve (the paper's tangent sign is rounding noise on gentle waves,
+      `signed_sine_and_status`).
+    - `status`: `ObjectiveStatus`; besides TIR and DEGENERATE it reports `BACKWARD` where
+      the refracted ray points away from `L`. `f` is a sine: it also vanishes at an
+      angle of pi and changes sign there in every orientation. Such points are no
+      solution; a status other than OK keeps them out of every bracket and acceptance.
+    - `g`: `f` in the "line" orientation. A true root flips both `f` and `g`; an
+      orientation flip of one of them flips only that one (`arcs.root_between`).
+
+    Batched with one `vmap` over the points: one call site per solver step keeps the
+    compiled program small (XLA compile time grows with every inlined copy).
+    """
+    def one(x):
+        f, st = signed_sine_and_status(V, N, P, L, x, eta, orientation="plane")
+        g, _ = signed_sine_and_status(V, N, P, L, x, eta, orientation="line")
+        _, _, _, w_L, _ = path_vectors(V, N, P, L, x)
+        backward = (st == ObjectiveStatus.OK) & (jnp.sum(refracted_direction(V, N, P, L, x, eta) * w_L) <= 0)
+        return f, jnp.where(backward, ObjectiveStatus.BACKWARD, st), g
+
+    return jax.vmap(one)(ab)

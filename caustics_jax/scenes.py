@@ -24,7 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .mesh import GridInfo, SurfaceMesh, _float_dtype
+from ._precision import default_float_dtype
+from .mesh import GridInfo, SurfaceMesh
 
 GRAVITY = 9.81
 
@@ -163,7 +164,7 @@ def wavy_pool(
         )
         return _scene(mesh, R, Rn, light, light_position, True, name)
     # Same connectivity as the grid, but the vertices have moved off it: a general mesh.
-    mesh = SurfaceMesh.from_arrays(X, g.faces(), N, dtype=_float_dtype(None, dtype))
+    mesh = SurfaceMesh.from_arrays(X, g.faces(), N, dtype=default_float_dtype(None, dtype))
     return _scene(mesh, R, Rn, light, light_position, False, name)
 
 
@@ -218,7 +219,7 @@ def lagoon(
     tri[cw] = tri[cw][:, [0, 2, 1]]
     waves = _gerstner_waves(rng, amplitude, n_waves, wavelength, 0.0)
     X, N = _gerstner_surface(waves, pts, time)
-    mesh = SurfaceMesh.from_arrays(X, tri, N, dtype=_float_dtype(None, dtype))
+    mesh = SurfaceMesh.from_arrays(X, tri, N, dtype=default_float_dtype(None, dtype))
     relief = _relief(rng, floor_relief, size)
     rx, ry = np.meshgrid(
         *[(np.arange(n_receivers) + 0.5) / n_receivers * s - s / 2 for s in size], indexing="xy"

@@ -129,6 +129,15 @@ def start_points(mesh: SurfaceMesh, P, L, *, method: str = "auto",
     return StartPoint(face.reshape(batch), ab.reshape(*batch, 2), found.reshape(batch))
 
 
+def first_crossing(mesh: SurfaceMesh, P, L, *, bvh: FaceBVH | None = None):
+    """The jitted cores of `start_points` without its validation, for callers that already
+    hold validated (or traced) `(n, 3)` arrays: the grid DDA when `mesh.grid` is set,
+    else the BVH (built here when not given). Returns `(face, ab, found)`."""
+    if mesh.grid is not None:
+        return _start_points_grid(mesh, P, L)
+    return _start_points_bvh(mesh, bvh if bvh is not None else build_bvh(mesh), P, L)
+
+
 def segment_triangle(P: Float[Array, "*batch 3"], d: Float[Array, "*batch 3"],
                      V: Float[Array, "*batch 3 3"]):  # fmt: skip
     """Crossing of the segment `P + s d, s in [0, 1]` with triangle `V` (Möller-Trumbore).

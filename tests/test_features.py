@@ -38,15 +38,13 @@ def make_scene(name, dtype):
 def test_features_flags():
     """Each flag is set exactly on the scenes that have the property."""
     flat, wavy = scenes.flat_pool(512).surface, scenes.wavy_pool(512).surface
-    assert features(flat) == SceneFeatures(flat=True, constant_normals=True, grid=True,
-                                           directional=False, compact_lanes=True)
-    assert features(wavy) == SceneFeatures(flat=False, constant_normals=False, grid=True,
-                                           directional=False, compact_lanes=True)
-    assert features(flat, scenes.flat_pool(512, light="directional").lights).directional
-    assert not features(flat, scenes.flat_pool(512, light="both").lights).directional
-    assert not features(flat, np.array([0.4, -0.3, 3.0])).directional
+    assert features(flat) == SceneFeatures(flat=True, compact_lanes=True)
+    assert features(wavy) == SceneFeatures(flat=False, compact_lanes=True)
+    # Lights are validated but change nothing the solvers skip.
+    assert features(flat, scenes.flat_pool(512, light="directional").lights) == features(flat)
+    assert features(flat, np.array([0.4, -0.3, 3.0])) == features(flat)
     # A tilted flat square (no grid): flat. An L-shaped flat mesh (not convex: the walk
-    # from M0 can leave it where the closed form would not): constant normals, not flat.
+    # from M0 can leave it where the closed form would not): not flat.
     n = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
     u = np.cross(n, [1.0, 0, 0])
     u /= np.linalg.norm(u)
@@ -57,9 +55,8 @@ def test_features_flags():
         V = (0.5 + grid[:, :1] * u + grid[:, 1:] * w)[: np.max(tris) + 1]
         return cj.SurfaceMesh.from_arrays(V, np.array(tris), normals=np.broadcast_to(n, V.shape))
     f_square = features(mesh(square))
-    assert f_square.flat and f_square.constant_normals and not f_square.grid
-    f_ell = features(mesh(square[:6]))
-    assert f_ell.constant_normals and not f_ell.flat
+    assert f_square.flat
+    assert not features(mesh(square[:6])).flat
 
 
 def test_bad_features_raise_value_error():
@@ -158,13 +155,13 @@ def test_flat_closed_form_matches_the_independent_flat_interface_reference(dtype
 def test_lanes_that_need_no_solve_never_enter_the_solver(monkeypatch):
     """The walk sees only lanes with a start point (compacted), and none on a flat pool."""
     seen = []
-    walk_batch = _solve._walk_batch
+    solve_walk = _solve.solve_walk
 
-    def spy(mesh, P, L, face, ab0, found, *args):
-        seen.append((P.shape[0], int(np.sum(np.asarray(found)))))
-        return walk_batch(mesh, P, L, face, ab0, found, *args)
+    def spy(mesh, P, L, eta, start, options):
+        seen.append((P.shape[0], int(np.sum(np.asarray(start[2])))))
+        return solve_walk(mesh, P, L, eta, start, options)
 
-    monkeypatch.setattr(_solve, "_walk_batch", spy)
+    monkeypatch.setattr(_solve, "solve_walk", spy)
     mesh, P, L = partly_covered_floor(jnp.float64, n=32, half=6.0)
     crossing = int(np.sum(np.asarray(cj.start_points(mesh, P, L).found)))
     assert 0 < crossing <= 256 < P.shape[0]  # compacted: one bucket of 256, not 1024 lanes

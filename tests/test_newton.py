@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from caustics_jax import scenes, solve
-from caustics_jax.solvers import Solution
-from caustics_jax.solvers.walk import default_tol
+from caustics_jax.solvers import Solution, default_tol
 from caustics_jax.testing import assert_solution_sane as _sane
 from caustics_jax.testing import planted_mesh_paths, refraction_angle_error
 

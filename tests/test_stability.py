@@ -17,8 +17,7 @@ import pytest
 
 import caustics_jax as cj
 from caustics_jax import scenes, stress
-from caustics_jax.solvers import Status
-from caustics_jax.solvers import default_tol
+from caustics_jax.solvers import Status, default_tol
 from caustics_jax.testing import oracle
 
 DTYPES = ["float32", "float64"]

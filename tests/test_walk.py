@@ -7,8 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from caustics_jax import SurfaceMesh, scenes, solve
-from caustics_jax.solvers import Solution, Status
-from caustics_jax.solvers.walk import default_tol
+from caustics_jax.solvers import Solution, Status, default_tol
 from caustics_jax.testing import planted_mesh_paths, planted_paths, refraction_angle_error
 
 DTYPES = ["float32", "float64"]

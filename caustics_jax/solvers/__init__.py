@@ -1,7 +1,17 @@
 """Solvers for refraction points: the curve walk (seed 001), optimistix Newton baselines,
-and an exhaustive all-solutions reference."""
+and an exhaustive all-solutions reference.
+
+Each solver is an object of its options (`Walk`, `Newton`, `Exhaustive`), validated when
+it is built; `solve(mesh, P, L, method="walk", **options)` is sugar for
+`solve(mesh, P, L, method=Walk(**options))`.
+"""
 
 from ._solution import Solution, Status
-from ._solve import solve
+from ._solve import METHODS, solve
+from .exhaustive import Exhaustive, ExhaustiveSolution
+from .newton import Newton
+from .options import SolverOptions, default_tol
+from .walk import Walk
 
-__all__ = ["Solution", "Status", "solve"]
+__all__ = ["METHODS", "Exhaustive", "ExhaustiveSolution", "Newton", "Solution", "SolverOptions", "Status",
+           "Walk", "default_tol", "solve"]

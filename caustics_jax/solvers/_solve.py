@@ -1,181 +1,126 @@
-"""`solve`: validate at the boundary, find start points, run the chosen solver jitted."""
+"""`solve`: validate at the boundary, find start points, run the chosen solver jitted.
+
+The solvers are objects of their options (`Walk`, `Newton`, `Exhaustive`, each validated
+once in its constructor); `method="walk"` with keyword options is sugar for
+`method=Walk(**options)`. Host analysis of the surface happens once per mesh
+(`prepared.prepare`), never per call.
+"""
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import os
-
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..barycentric import barycentric_point
 from ..features import GENERAL, SceneFeatures
 from ..features import check as check_features
-from ..features import resolve as resolve_features
+from ..lanes import compact_index, lane_bucket, pad_lanes, scatter_lanes
 from ..mesh import SurfaceMesh
-from ..start_points import start_points
+from ..prepared import PreparedSurface, prepare
+from ..start_points import StartPoint
 from ._solution import Solution, Status
-from .newton import newton_options, solve_newton
-from .walk import WalkOptions, default_tol, walk_lane
+from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
+from .flat import flat_root, flat_solution
+from .newton import Newton, solve_newton
+from .options import SolverOptions, check_eta
+from .walk import Walk, solve_walk
 
-METHODS = ("walk", "newton", "exhaustive")
+#: `method=` names and their solver classes.
+METHODS: dict[str, type[SolverOptions]] = {"walk": Walk, "newton": Newton, "exhaustive": Exhaustive}
 
 
-def _validate(mesh, P, L, eta, method):
-    if not isinstance(mesh, SurfaceMesh):
-        raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+def solver_from(method, options: dict) -> SolverOptions:
+    """The solver object for `method` (a name of `METHODS` with keyword options, or an
+    instance, then without options); raises `ValueError` naming what is wrong."""
+    if isinstance(method, SolverOptions):
+        if options:
+            raise ValueError(f"options {sorted(options)} given next to a solver object {method!r}: "
+                             "set them on the object")
+        return method
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"method must be one of {tuple(METHODS)} or a solver object "
+                         f"(caustics_jax.Walk, Newton, Exhaustive), got {method!r}")
+    return METHODS[method].from_kwargs(**options)
+
+
+def check_points(name: str, X, dtype) -> np.ndarray:
+    """`X` as a float64 numpy array of shape `(..., 3)`: real numbers (integers are
+    promoted), finite, and finite after the cast to the mesh's `dtype`."""
+    X = np.asarray(X)
+    if X.dtype == bool or not (np.issubdtype(X.dtype, np.integer) or np.issubdtype(X.dtype, np.floating)):
+        raise ValueError(f"{name} must hold real numbers (integer or float), got dtype {X.dtype}")
+    if X.ndim == 0 or X.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) (or broadcast to it), got {X.shape}")
+    X = X.astype(np.float64)
+    with np.errstate(over="ignore"):
+        bad = ~np.all(np.isfinite(X) & np.isfinite(X.astype(dtype)), axis=-1)
+    if np.any(bad):
+        rows = np.nonzero(bad.reshape(-1))[0][:10].tolist()
+        raise ValueError(f"{name} has NaN or Inf coordinates, or coordinates that overflow "
+                         f"{np.dtype(dtype).name}, at rows {rows}")
+    return X
+
+
+def check_lanes(mesh: SurfaceMesh, P, L):
+    """`P`, `L` broadcast to `(N, 3)` in the mesh's dtype (see `check_points`)."""
     dtype = mesh.dtype
-    out = []
-    for name, X in (("P", P), ("L", L)):
-        X = np.asarray(X)
-        if X.ndim == 0 or X.shape[-1] != 3:
-            raise ValueError(f"{name} must have shape (N, 3) (or broadcast to it), got {X.shape}")
-        if not np.issubdtype(X.dtype, np.number):
-            raise ValueError(f"{name} must be numeric, got dtype {X.dtype}")
-        bad = ~np.all(np.isfinite(X), axis=-1)
-        if np.any(bad):
-            rows = np.nonzero(bad.reshape(-1))[0][:10].tolist()
-            raise ValueError(f"{name} has NaN or Inf coordinates at rows {rows}")
-        out.append(X)
+    P_np, L_np = (check_points(name, X, dtype) for name, X in (("P", P), ("L", L)))
     try:
-        P, L = np.broadcast_arrays(out[0].reshape(-1, 3) if out[0].ndim == 1 else out[0],
-                                   out[1].reshape(-1, 3) if out[1].ndim == 1 else out[1])
+        P_np, L_np = np.broadcast_arrays(P_np.reshape(-1, 3) if P_np.ndim == 1 else P_np,
+                                         L_np.reshape(-1, 3) if L_np.ndim == 1 else L_np)
     except ValueError as exc:
-        raise ValueError(f"P {out[0].shape} and L {out[1].shape} do not broadcast") from exc
-    if P.ndim != 2:
-        raise ValueError(f"P and L must broadcast to (N, 3), got {P.shape}")
-    eta_f = float(eta)
-    if not np.isfinite(eta_f) or eta_f <= 0:
-        raise ValueError(f"eta must be a finite positive index ratio, got {eta}")
-    return jnp.asarray(P, dtype), jnp.asarray(L, dtype), eta_f
+        raise ValueError(f"P {P_np.shape} and L {L_np.shape} do not broadcast") from exc
+    if P_np.ndim != 2:
+        raise ValueError(f"P and L must broadcast to (N, 3), got {P_np.shape}")
+    return jnp.asarray(P_np, dtype), jnp.asarray(L_np, dtype)
 
 
-def _bucket(n: int, minimum: int = 256) -> int:
-    return max(minimum, 1 << (max(n, 1) - 1).bit_length())
-
-
-LANE_CHUNK = int(os.environ.get("CAUSTICS_JAX_LANE_CHUNK", 256))
-
-
-def map_lanes(fn, *args, chunk: int | None = None):
-    """`vmap(fn)` over lanes, `chunk` lanes at a time (`lax.map` with `batch_size`).
-
-    A vmapped while loop runs until its slowest lane ends: over 100k lanes one lane that
-    needs 90 iterations (median 5) would hold up all of them. In chunks, each chunk stops
-    at its own slowest lane.
-    """
-    chunk = LANE_CHUNK if chunk is None else chunk
-    if args[0].shape[0] <= chunk:
-        return jax.vmap(fn)(*args)
-    return jax.lax.map(lambda a: fn(*a), args, batch_size=chunk)
-
-
-def lane_bucket(n: int) -> int:
-    """Lanes a batch is padded to: a power of two up to 4096 (at least 256), then a multiple
-    of 4096 (at most 4% extra work above 100k lanes), so jit compiles once per size class."""
-    return _bucket(n, 256) if n <= 4096 else -(-n // 4096) * 4096
-
-
-def _pad_lanes(P, L, start):
-    """Pad lanes with copies of lane 0 marked `found = False` (they end at once)."""
-    n = P.shape[0]
-    extra = lane_bucket(n) - n
-    if extra == 0:
-        return P, L, start
-
-    def pad(x, value=None):
-        fill = jnp.broadcast_to(x[:1] if value is None else jnp.asarray(value, x.dtype),
-                                (extra,) + x.shape[1:])
-        return jnp.concatenate([x, fill])
-
-    face, ab0, found = start
-    return pad(P), pad(L), (pad(face), pad(ab0), pad(found, False))
-
-
-def bucketed(mesh: SurfaceMesh) -> SurfaceMesh:
-    """The mesh padded to power-of-two face and vertex counts, so jit compiles once per bucket.
-
-    The static `grid` layout is dropped. Padding faces are `(0, 0, 0)` with no neighbours
-    and are never referenced by a real face's adjacency, so no walk can enter them;
-    padding vertices are zeros.
-    """
-    F, V = mesh.faces.shape[0], mesh.vertices.shape[0]
-    Fb, Vb = _bucket(F), _bucket(V)
-    # The solvers never read the grid layout (only start points do); as a static field it
-    # would make every pool size its own compile.
-    mesh = dataclasses.replace(mesh, grid=None)
-    if (F, V) == (Fb, Vb):
-        return mesh
-
-    def pad(x, n, value):
-        return jnp.concatenate([x, jnp.full((n - x.shape[0],) + x.shape[1:], value, x.dtype)])
-
-    return eqx.tree_at(
-        lambda m: (m.vertices, m.normals, m.faces, m.face_normals, m.neighbors, m.neighbor_edge),
-        mesh,
-        (pad(mesh.vertices, Vb, 0), pad(mesh.normals, Vb, 0), pad(mesh.faces, Fb, 0),
-         pad(mesh.face_normals, Fb, 0), pad(mesh.neighbors, Fb, -1), pad(mesh.neighbor_edge, Fb, -1)),
-    )
-
-
-@functools.partial(jax.jit, static_argnames=("options",))
-def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps,
-                options: WalkOptions) -> Solution:
-    eta = jnp.asarray(eta, mesh.dtype)
-    tol = jnp.asarray(tol, mesh.dtype)
-    states = map_lanes(
-        lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps),
-        P, L, face, ab0, found)
-    V, N = mesh.triangle(states.face)
-    from ..objectives import signed_sine
-
-    residual = signed_sine(V, N, P, L, states.best_ab, eta, orientation="plane")
-    status = states.status
-    found_out = status == Status.FOUND
-    V0, _ = mesh.triangle(face)
-    return Solution(
-        point=jnp.where(found[:, None], barycentric_point(V, states.best_ab), 0),
-        triangle=jnp.where(found, states.face, -1),
-        barycentric=jnp.where(found[:, None], states.best_ab, 0),
-        found=found_out,
-        status=status,
-        iterations=states.steps,
-        residual=jnp.where(found, residual, 0),
-        crossed=states.crossed,
-        start_point=jnp.where(found[:, None], barycentric_point(V0, ab0), 0),
-    )
-
-
-def _walk_options(**options) -> WalkOptions:
+def check_start(start, n: int, dtype) -> StartPoint | None:
+    """A user-given `start=` (a `StartPoint`, or `(face, barycentric, found)`) for `n` lanes."""
+    if start is None:
+        return None
     try:
-        opts = WalkOptions(**options)
-    except TypeError as exc:
-        raise ValueError(f"unknown walk option: {exc}") from exc
-    if opts.bracket not in ("illinois", "bisection"):
-        raise ValueError(f"bracket must be 'illinois' or 'bisection', got {opts.bracket!r}")
-    if opts.max_steps < 1 or opts.ellipse_samples < 2:
-        raise ValueError("max_steps must be >= 1 and ellipse_samples >= 2")
-    return opts
+        face, ab, found = start
+    except (TypeError, ValueError):
+        raise ValueError("start must be a StartPoint or a tuple (face (N,), barycentric (N, 2), "
+                         "found (N,)) from caustics_jax.start_points") from None
+    face, ab, found = np.asarray(face), np.asarray(ab), np.asarray(found)
+    if face.shape != (n,) or ab.shape != (n, 2) or found.shape != (n,):
+        raise ValueError(f"start must hold face ({n},), barycentric ({n}, 2) and found ({n},) for the "
+                         f"{n} lanes of P and L, got {face.shape}, {ab.shape}, {found.shape}")
+    if not np.issubdtype(face.dtype, np.integer) or not np.all(np.isfinite(ab)):
+        raise ValueError("start: face must be integer and barycentric finite")
+    return StartPoint(jnp.asarray(face, jnp.int32), jnp.asarray(ab, dtype), jnp.asarray(found, bool))
 
 
-def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", start=None,
+def empty_solution(n: int, dtype, status: Status = Status.NO_CROSSING) -> Solution:
+    """What every solver returns for a lane without a start point: `NO_CROSSING`, zeros,
+    triangle -1, no iterations (also the result of zero lanes, `n = 0`)."""
+    return Solution(
+        point=jnp.zeros((n, 3), dtype), triangle=jnp.full(n, -1, jnp.int32),
+        barycentric=jnp.zeros((n, 2), dtype), found=jnp.zeros(n, bool),
+        status=jnp.full(n, status, jnp.int32), iterations=jnp.zeros(n, jnp.int32),
+        residual=jnp.zeros(n, dtype), crossed=jnp.zeros(n, jnp.int32),
+        start_point=jnp.zeros((n, 3), dtype),
+    )
+
+
+def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, method="walk", start=None,
           features="auto", **options) -> Solution:
     """Find refraction points `M` of paths `P -> M -> L` through the surface (seed 001 §3.4).
 
     Args:
-        mesh: the refractive surface (`SurfaceMesh`), normals outward toward the light.
+        mesh: the refractive surface (`SurfaceMesh`, normals outward toward the light), or
+            a `PreparedSurface` from `caustics_jax.prepare(mesh)` (either way the host
+            analysis runs once per mesh).
         P: `(N, 3)` receivers inside the medium (cast to the mesh's dtype).
         L: `(N, 3)` light positions (or one `(3,)` broadcast to all).
-        eta: `eta_in / eta_out` (water 1.333).
-        method: "walk" (seed 001 curve walk), "newton" (optimistix baselines) or
-            "exhaustive" (all solutions, reference).
+        eta: `eta_in / eta_out` (water 1.333), one finite positive number.
+        method: "walk" (seed 001 curve walk), "newton" (optimistix baselines),
+            "exhaustive" (all solutions, reference), or a solver object `Walk(...)`,
+            `Newton(...)`, `Exhaustive(...)`.
         start: optional precomputed `start_points(mesh, P, L)` result.
-        features: `"auto"` (default: `caustics_jax.features(mesh)`), `None` (always the
+        features: `"auto"` (default: the mesh's `SceneFeatures`), `None` (always the
             general path) or a `SceneFeatures` from `features(mesh)`. Walk and Newton
             (`n_starts=1`) skip what the scene does not need: lanes whose segment cannot
             reach the surface skip the start-point search, lanes without a start point
@@ -183,43 +128,51 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
             in closed form (`solvers/flat.py`). Same statuses and points as `None`
             (docs/features.md); `iterations` and `crossed` of closed-form lanes count the
             root solve's halvings and no crossings. Ignored by "exhaustive".
-        **options: per method; "walk": `tol`, `max_steps`, `bracket`, `ellipse_samples`
-            (`WalkOptions`); "newton": `solver`, `constraint`, `tol`, `inner_steps`,
-            `max_patches`, `n_starts`, `seed` (`NewtonOptions`); "exhaustive": `samples`,
-            `iters`, `tol`, `chunk`, `dedupe`, `return_all`.
+        **options: the solver's options when `method` is a name (`Walk`, `Newton`,
+            `Exhaustive` list them).
 
     Walk and Newton batches are padded to `lane_bucket(N)` lanes and meshes to
     power-of-two sizes, so jit compiles once per size class.
 
-    Returns a `Solution`; `status` holds `Status` codes and `found` is True exactly where a
-    point with `|residual| <= tol` was returned. Bad input raises `ValueError` here,
-    before any jitted work.
+    Returns a `Solution` (an `ExhaustiveSolution` for `Exhaustive(return_all=True)`);
+    `status` holds `Status` codes and `found` is True exactly where a point with
+    `|residual| <= tol` was returned. Bad input raises `ValueError` here, before any
+    jitted work; zero lanes give an empty result.
     """
-    P, L, eta = _validate(mesh, P, L, eta, method)
+    prep = prepare(mesh)
+    solver = solver_from(method, options)
+    P, L = check_lanes(prep.mesh, P, L)
+    eta = check_eta(eta)
     check_features(features)
-    if method == "exhaustive":
-        from .exhaustive import OPTIONS, solve_exhaustive
-
-        unknown = sorted(set(options) - set(OPTIONS))
-        if unknown:
-            raise ValueError(f"unknown exhaustive option(s) {unknown}; known: {OPTIONS}")
-        return solve_exhaustive(mesh, P, L, eta, start=start, **options)
-    opts = _walk_options(**options) if method == "walk" else newton_options(mesh.dtype, **options)
-    feats = resolve_features(features, mesh)
-    if feats is not None and feats != GENERAL and not (method == "newton" and opts.n_starts > 1):
+    n, dtype = P.shape[0], prep.dtype
+    start = check_start(start, n, dtype)
+    if isinstance(solver, Exhaustive):
+        if n == 0:
+            if dtype != jnp.float64:
+                raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
+            sol = empty_solution(0, dtype, Status.NO_SOLUTION)
+            return ExhaustiveSolution(sol, np.zeros((0, 1, 3)), np.zeros((0, 1), np.int32),
+                                      np.zeros(0, np.int32)) if solver.return_all else sol
+        start = start if start is not None else prep.start_points(P, L)
+        return solve_exhaustive(prep.mesh, P, L, eta, tuple(start), solver, padded=prep.padded)
+    if isinstance(solver, Newton):
+        solver.check_dtype(dtype)
+    if n == 0:
+        return empty_solution(0, dtype)
+    feats = prep.features if isinstance(features, str) else features
+    if feats is not None and feats != GENERAL and not (isinstance(solver, Newton) and solver.n_starts > 1):
         # (Newton's extra random starts are drawn per lane position: compaction would move them.)
-        return _solve_specialised(mesh, P, L, eta, method, start, opts, feats)
+        return _solve_specialised(prep, P, L, eta, start, solver, feats)
+    start = start if start is not None else prep.start_points(P, L)
+    return _run_padded(prep, P, L, eta, tuple(start), solver)
+
+
+def _run_padded(prep: PreparedSurface, P, L, eta, start, solver) -> Solution:
+    """The solver on the lanes padded to their size class, cut back to `N` lanes."""
     n = P.shape[0]
-    start = start if start is not None else start_points(mesh, P, L)
-    P, L, start = _pad_lanes(P, L, start)
-    if method == "walk":
-        face, ab0, found = start
-        tol = opts.tol if opts.tol is not None else default_tol(mesh.dtype)
-        static = opts._replace(tol=None, max_steps=0)  # traced: one compile for any value
-        sol = _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
-                          jnp.int32(opts.max_steps), static)
-    else:
-        sol = solve_newton(mesh, P, L, eta, start, opts)
+    P, L, start = pad_lanes(P, L, start)
+    run = solve_walk if isinstance(solver, Walk) else solve_newton
+    sol = run(prep.padded, P, L, eta, start, solver)
     return jax.tree.map(lambda x: x[:n], sol)
 
 
@@ -227,87 +180,50 @@ def solve(mesh: SurfaceMesh, P, L, *, eta: float = 1.333, method: str = "walk", 
 # (`features`, DESIGN.md "Skipping what a scene does not need"; docs/features.md)
 
 
-def compact_index(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gather indices for the lanes `idx`, padded to `lane_bucket(len(idx))` with copies of
-    `idx[0]` (one compile per size class), and the mask of the real ones."""
-    k = idx.size
-    g = np.concatenate([idx, np.full(lane_bucket(k) - k, idx[0], idx.dtype)])
-    return g, np.arange(g.size) < k
-
-
-def scatter_lanes(base, g: np.ndarray, keep: np.ndarray, sub):
-    """`base` with lanes `g[keep]` replaced by the matching lanes of `sub` (pytrees)."""
-    n = jax.tree.leaves(base)[0].shape[0]
-    target = jnp.asarray(np.where(keep, g, n))  # n is out of bounds: dropped
-    return jax.tree.map(lambda b, s: b.at[target].set(s.astype(b.dtype), mode="drop"), base, sub)
-
-
-def _no_crossing(n: int, dtype) -> Solution:
-    """What every solver returns for a lane without a start point (walk `_first_triangle`,
-    Newton `_newton_lane`): `NO_CROSSING`, zeros, triangle -1, no iterations."""
-    return Solution(
-        point=jnp.zeros((n, 3), dtype), triangle=jnp.full(n, -1, jnp.int32),
-        barycentric=jnp.zeros((n, 2), dtype), found=jnp.zeros(n, bool),
-        status=jnp.full(n, Status.NO_CROSSING, jnp.int32), iterations=jnp.zeros(n, jnp.int32),
-        residual=jnp.zeros(n, dtype), crossed=jnp.zeros(n, jnp.int32),
-        start_point=jnp.zeros((n, 3), dtype),
-    )
-
-
-def _compacted_start_points(mesh: SurfaceMesh, P, L):
+def _compacted_start_points(prep: PreparedSurface, P, L):
     """`start_points` for the lanes whose segment's bounding box meets the mesh's; the rest
     (receiver and light both above the water, or both beside the pool) cannot cross."""
     n = P.shape[0]
-    V = np.asarray(mesh.vertices, np.float64)
-    lo, hi = V.min(0), V.max(0)
-    pad = 1e-4 * float(np.max(hi - lo) + np.max(np.abs(V)) + 1)  # conservative: rounding never drops a crossing
-    P_np, L_np = np.asarray(P, np.float64), np.asarray(L, np.float64)
-    meets = np.all((np.maximum(P_np, L_np) >= lo - pad) & (np.minimum(P_np, L_np) <= hi + pad), -1)
-    base = (jnp.full(n, -1, jnp.int32), jnp.zeros((n, 2), mesh.dtype), jnp.zeros(n, bool))
+    meets = prep.may_cross(np.asarray(P, np.float64), np.asarray(L, np.float64))
+    base = (jnp.full(n, -1, jnp.int32), jnp.zeros((n, 2), prep.dtype), jnp.zeros(n, bool))
     idx = np.flatnonzero(meets)
     if idx.size == 0:
         return base
     if idx.size == n:  # nothing to skip: no gather, no scatter
-        return tuple(start_points(mesh, P, L))
+        return tuple(prep.start_points(P, L))
     g, real = compact_index(idx)
-    sub = start_points(mesh, P[g], L[g])
+    sub = prep.start_points(P[g], L[g])
     return scatter_lanes(base, g, real, (sub.face, sub.barycentric, sub.found))
 
 
-def _solve_specialised(mesh, P, L, eta, method, start, opts, feats: SceneFeatures) -> Solution:
+def _solve_specialised(prep: PreparedSurface, P, L, eta, start, solver, feats: SceneFeatures) -> Solution:
     """`solve` for `features`: closed form where the scene allows it, the solver on the
     compacted remaining lanes, results scattered back (docs/features.md)."""
-    from .flat import flat_root, flat_solution
-
-    n, dtype = P.shape[0], mesh.dtype
+    n, dtype, mesh = P.shape[0], prep.dtype, prep.mesh
     if start is None:
-        start = _compacted_start_points(mesh, P, L) if feats.compact_lanes else start_points(mesh, P, L)
+        start = _compacted_start_points(prep, P, L) if feats.compact_lanes else tuple(prep.start_points(P, L))
     face, ab0, found = (jnp.asarray(x) for x in start)
     found_np = np.asarray(found)
-    tol = opts.tol if opts.tol is not None else default_tol(dtype)
-    sol = _no_crossing(n, dtype)
+    sol = empty_solution(n, dtype)
     need = found_np.copy() if feats.compact_lanes else np.ones(n, bool)
-    if feats.flat and method == "walk" and found_np.any():
+    if feats.flat and isinstance(solver, Walk) and found_np.any():
         g, real = compact_index(np.flatnonzero(found_np))
         P_g, L_g = P[g], L[g]
         _, below, above, usable = flat_root(mesh, P_g, L_g, eta)
-        located = start_points(mesh, below, above)
-        flat_sol, good = flat_solution(mesh, P_g, L_g, eta, tol, usable, tuple(located), face[g], ab0[g])
+        located = prep.start_points(below, above)
+        flat_sol, good = flat_solution(mesh, P_g, L_g, eta, solver.tolerance(dtype), usable, tuple(located),
+                                       face[g], ab0[g])
         keep = real & np.asarray(good)
         sol = scatter_lanes(sol, g, keep, flat_sol)
         need[g[keep]] = False
     if not need.any():
         return sol
-
-    def run(P, L, face, ab0, found):
-        if method == "walk":
-            static = opts._replace(tol=None, max_steps=0)
-            return _walk_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
-                               jnp.int32(opts.max_steps), static)
-        return solve_newton(mesh, P, L, eta, (face, ab0, found), opts)
-
     if need.all():  # nothing to skip: the general batch as is
-        P, L, start = _pad_lanes(P, L, (face, ab0, found))
-        return jax.tree.map(lambda x: x[:n], run(P, L, *start))
+        return _run_padded(prep, P, L, eta, (face, ab0, found), solver)
     g, real = compact_index(np.flatnonzero(need))
-    return scatter_lanes(sol, g, real, run(P[g], L[g], face[g], ab0[g], found[g] & jnp.asarray(real)))
+    run = solve_walk if isinstance(solver, Walk) else solve_newton
+    sub = run(prep.padded, P[g], L[g], eta, (face[g], ab0[g], found[g] & jnp.asarray(real)), solver)
+    return scatter_lanes(sol, g, real, sub)
+
+
+__all__ = ["METHODS", "empty_solution", "lane_bucket", "solve", "solver_from"]

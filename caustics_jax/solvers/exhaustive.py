@@ -6,12 +6,12 @@ For each lane (P, L) and each face:
    edge, or is an ellipse whose centre lies inside the face with the opposite sign of
    `Q` at a vertex (seed 001 Fig. 5a).
 2. Every arc inside a face starts at an edge root; from each root, oriented inward, the
-   arc runs to the next crossing along the curve (`walk._next_crossing`). The arc is
+   arc runs to the next crossing along the curve (`arcs.face_arcs`). The arc is
    sampled at `samples` pencil angles through its start (`phi` in `(0, phi_exit)`,
    which covers exactly that arc); an ellipse inside the face is sampled over the whole
    pencil `(0, pi)` through a point of it.
 3. Every interval where `f` changes sign in both orientations (a root, not an
-   orientation flip; `walk._root_between`) is refined by bisection in `phi`. An interval
+   orientation flip; `arcs.root_between`) is refined by bisection in `phi`. An interval
    from a transmitting sample to a totally reflecting one is first cut at the onset of
    total internal reflection (bisection on the status), and a sign change between the
    sample and the onset is refined the same way: near-critical roots have no sample on
@@ -27,31 +27,54 @@ count is a lower bound; the tests check it against planted paths).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arcs import N_ARCS, conic_touches_face, face_arcs, root_between
 from ..barycentric import barycentric_point
-from ..conic import conic_coefficients, conic_value, solve_quadratic
-from ..objectives import ObjectiveStatus, path_vectors, refracted_direction
+from ..conic import conic_coefficients
+from ..lanes import padded_index, padded_mesh, power_of_two_bucket
+from ..objectives import ObjectiveStatus, bracket_objective, path_vectors, refracted_direction
 from ..start_points import start_points
 from ._solution import Solution, Status
-from .walk import (
-    _INWARD,
-    _edge_roots,
-    _f,
-    _next_crossing,
-    _orientation,
-    _pencil_point,
-    _root_between,
-)
+from .options import SolverOptions, check_bool, check_int, check_real, check_tol
 
-OPTIONS = ("samples", "iters", "tol", "chunk", "dedupe", "return_all")
 ROOTS_PER_ARC = 2
-N_ARCS = 7  # up to 6 edge roots as arc starts, plus one ellipse inside the face
+
+
+@dataclasses.dataclass(frozen=True)
+class Exhaustive(SolverOptions):
+    """The exhaustive all-solutions reference (float64) and its options.
+
+    samples: pencil samples per arc, in `[2, 4096]`.
+    iters: bisection steps per bracket, in `[1, 200]`.
+    tol: acceptance `|f| <= tol`, in `(0, 1)`.
+    chunk: (lane, face) pairs per jitted batch, in `[1, 2^20]`.
+    dedupe: two roots closer than this (m) are one solution, `>= 0`.
+    return_all: return an `ExhaustiveSolution` with every solution per lane.
+    """
+
+    method: ClassVar[str] = "exhaustive"
+
+    samples: int = 32
+    iters: int = 60
+    tol: float = 1e-9
+    chunk: int = 4096
+    dedupe: float = 1e-7
+    return_all: bool = False
+
+    def _validate(self):
+        object.__setattr__(self, "samples", check_int("samples", self.samples, 2, 4096))
+        object.__setattr__(self, "iters", check_int("iters", self.iters, 1, 200))
+        object.__setattr__(self, "tol", check_tol("tol", self.tol, optional=False))
+        object.__setattr__(self, "chunk", check_int("chunk", self.chunk, 1, 2**20))
+        object.__setattr__(self, "dedupe", check_real("dedupe", self.dedupe, 0.0))
+        object.__setattr__(self, "return_all", check_bool("return_all", self.return_all))
 
 
 class ExhaustiveSolution(NamedTuple):
@@ -70,21 +93,6 @@ class ExhaustiveSolution(NamedTuple):
     count: np.ndarray
 
 
-def _touches(coef, V):
-    """Does the conic pass through the face? Edge crossings, or an ellipse inside."""
-    _, valid, _ = _edge_roots(coef)
-    A, B, C, D, E, F = coef
-    det = 4 * A * B - C * C
-    ellipse = det > 0
-    safe = jnp.where(ellipse, det, 1)
-    a_c = (C * E - 2 * B * D) / safe
-    b_c = (C * D - 2 * A * E) / safe
-    inside = (a_c >= 0) & (b_c >= 0) & (a_c + b_c <= 1)
-    centre = jnp.stack([a_c, b_c])
-    opposite = conic_value(coef, centre) * F < 0  # F = Q at vertex V0
-    return jnp.any(valid) | (ellipse & inside & opposite)
-
-
 @jax.jit
 def _cull(mesh, P, L):
     """`(n, F)` mask of faces whose conic meets them, for lanes `P, L` `(n, 3)`."""
@@ -92,7 +100,7 @@ def _cull(mesh, P, L):
 
     def lane(p, l):
         coef = conic_coefficients(V, N, p[None], l[None])
-        return jax.vmap(_touches)(coef, V) & (mesh.neighbors[:, 0] >= -1)
+        return jax.vmap(conic_touches_face)(coef) & (mesh.neighbors[:, 0] >= -1)
 
     return jax.vmap(lane)(P, L)
 
@@ -102,7 +110,7 @@ def _refine(point, V, N, P, L, eta, lo, hi, f_lo, iters):
     def body(_, c):
         lo, hi, f_lo = c
         mid = (lo + hi) / 2
-        fm = _f(V, N, P, L, point(mid)[None], eta)[0][0]
+        fm = bracket_objective(V, N, P, L, point(mid)[None], eta)[0][0]
         left = jnp.sign(fm) * jnp.sign(f_lo) < 0
         return jnp.where(left, lo, mid), jnp.where(left, mid, hi), jnp.where(left, f_lo, fm)
 
@@ -110,69 +118,10 @@ def _refine(point, V, N, P, L, eta, lo, hi, f_lo, iters):
     return point((lo + hi) / 2)
 
 
-class _Arcs(NamedTuple):
-    """The arcs of one face's conic, each parametrised by `u` in `[0, 1]` (`point`)."""
-
-    V: jax.Array
-    N: jax.Array
-    coef: jax.Array
-    straight: jax.Array
-    starts: jax.Array
-    ends: jax.Array
-    taus: jax.Array
-    perps: jax.Array
-    phi_ends: jax.Array
-    ok: jax.Array
-
-    def point(self, arc, u):
-        """The pencil angle `phi = u phi_end` through the arc's start for a curved conic; the
-        straight segment to the next crossing when the conic is a line (constant normals:
-        `A = B = C = 0`, where every other line through a curve point meets it only there,
-        so the pencil cannot parametrise it)."""
-        curved, curved_ok = _pencil_point(self.coef, self.starts[arc], self.taus[arc],
-                                          self.perps[arc], u * self.phi_ends[arc])
-        line = self.starts[arc] + u * (self.ends[arc] - self.starts[arc])
-        return jnp.where(self.straight, line, curved), self.straight | curved_ok
-
-
-def _arcs(mesh, P, L, face) -> _Arcs:
-    """Every arc inside the face: from each edge root to the next crossing along the curve,
-    plus an ellipse inside the face (no edge root)."""
+def _arcs(mesh, P, L, face):
+    """`(V, N, FaceArcs)` of one face for one lane."""
     V, N = mesh.triangle(face)
-    coef = conic_coefficients(V, N, P, L)
-    A, B, C, D, E, F = coef
-    scale = jnp.max(jnp.abs(coef))
-    straight = jnp.max(jnp.abs(coef[:3])) <= 64 * jnp.finfo(coef.dtype).eps * scale
-    roots = _edge_roots(coef)
-    t_all, valid_all, ab_all = roots
-    starts, ends, taus, perps, phi_ends, ok_arcs = [], [], [], [], [], []
-    for k in range(3):
-        for j in range(2):
-            x = ab_all[k, j]
-            t = jnp.stack([-(C / 2 * x[0] + B * x[1] + E / 2), A * x[0] + C / 2 * x[1] + D / 2])
-            inward = jnp.asarray(_INWARD[k], t.dtype)
-            side = t @ inward
-            tau, perp = _orientation(coef, x, jnp.where(side < 0, -t, t))
-            ok, _, _, end, phi = _next_crossing(roots, x, tau, perp, k, t_all[k, j])
-            starts.append(x)
-            ends.append(end)
-            taus.append(tau)
-            perps.append(perp)
-            phi_ends.append(jnp.where(ok, phi, 0))
-            ok_arcs.append(valid_all[k, j] & ok & (side != 0))
-    # Ellipse inside the face (no edge root): anchor where the line b = 1/3 meets it.
-    s, s_ok = solve_quadratic(A, C / 3 + D, B / 9 + E / 3 + F)
-    anchor = jnp.stack([s[0], jnp.asarray(1 / 3, s.dtype)])
-    t = jnp.stack([-(C / 2 * anchor[0] + B * anchor[1] + E / 2), A * anchor[0] + C / 2 * anchor[1] + D / 2])
-    tau, perp = _orientation(coef, anchor, t)
-    starts.append(anchor)
-    ends.append(anchor)
-    taus.append(tau)
-    perps.append(perp)
-    phi_ends.append(jnp.asarray(jnp.pi, s.dtype) * (1 - 1e-9))
-    ok_arcs.append(~jnp.any(valid_all) & s_ok[0] & ~straight)
-    return _Arcs(V, N, coef, straight, jnp.stack(starts), jnp.stack(ends), jnp.stack(taus),
-                 jnp.stack(perps), jnp.stack(phi_ends), jnp.stack(ok_arcs))
+    return V, N, face_arcs(conic_coefficients(V, N, P, L))
 
 
 def _sample_u(samples, dtype):
@@ -188,15 +137,15 @@ def _brackets(mesh, P, L, face, eta, samples):
     """Phase 1 for one (lane, face): sample every arc; up to ROOTS_PER_ARC sign changes of
     `f` per arc (kind 0) and ROOTS_PER_ARC transmit/TIR transitions (kind 1), as
     `(valid, arc, sample index)`, each `(2 N_ARCS ROOTS_PER_ARC,)`."""
-    arcs = _arcs(mesh, P, L, face)
+    V, N, arcs = _arcs(mesh, P, L, face)
     u = _sample_u(samples, arcs.coef.dtype)
     ids = jnp.arange(N_ARCS)
     pts, pts_ok = jax.vmap(lambda a: jax.vmap(lambda x: arcs.point(a, x))(u))(ids)
-    f, st, g = _f(arcs.V, arcs.N, P, L, pts.reshape(-1, 2), eta)
+    f, st, g = bracket_objective(V, N, P, L, pts.reshape(-1, 2), eta)
     f, st, g = (x.reshape(N_ARCS, samples) for x in (f, st, g))
     good = pts_ok & (st == ObjectiveStatus.OK)
     tir = pts_ok & (st == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
-    change = _root_between((f[:, :-1], g[:, :-1]), (f[:, 1:], g[:, 1:])) & good[:, :-1] & good[:, 1:]
+    change = root_between((f[:, :-1], g[:, :-1]), (f[:, 1:], g[:, 1:])) & good[:, :-1] & good[:, 1:]
     onset = (good[:, :-1] & tir[:, 1:]) | (tir[:, :-1] & good[:, 1:])
     out = []
     for mask in (change, onset):
@@ -213,10 +162,10 @@ def _refine_slot(mesh, P, L, face, eta, arc, i, kind, samples, iters):
     the onset of total internal reflection has no sample on its far side, so find the
     onset first (bisection on the status), then look for a sign change up to it.
     """
-    arcs = _arcs(mesh, P, L, face)
+    V, N, arcs = _arcs(mesh, P, L, face)
     u = _sample_u(samples, arcs.coef.dtype)
     u_lo, u_hi = u[i], u[i + 1]
-    f2, st2, g2 = _f(arcs.V, arcs.N, P, L, jnp.stack([arcs.point(arc, u_lo)[0],
+    f2, st2, g2 = bracket_objective(V, N, P, L, jnp.stack([arcs.point(arc, u_lo)[0],
                                                       arcs.point(arc, u_hi)[0]]), eta)
     lo_ok = st2[0] == ObjectiveStatus.OK
     u_ok, u_far = jnp.where(lo_ok, u_lo, u_hi), jnp.where(lo_ok, u_hi, u_lo)
@@ -225,15 +174,15 @@ def _refine_slot(mesh, P, L, face, eta, arc, i, kind, samples, iters):
     def body(_, c):
         a, b = c  # a transmits, b reflects totally
         m = (a + b) / 2
-        stm = _f(arcs.V, arcs.N, P, L, arcs.point(arc, m)[0][None], eta)[1][0]
+        stm = bracket_objective(V, N, P, L, arcs.point(arc, m)[0][None], eta)[1][0]
         is_tir = stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
         return jnp.where(is_tir, a, m), jnp.where(is_tir, m, b)
 
     onset = kind == 1
     u_b, _ = jax.lax.fori_loop(0, jnp.where(onset, iters, 0), body, (u_ok, u_far))
-    f_b, st_b, g_b = (x[0] for x in _f(arcs.V, arcs.N, P, L, arcs.point(arc, u_b)[0][None], eta))
-    bracket = ~onset | (_root_between((f_ok, g_ok), (f_b, g_b)) & (st_b == ObjectiveStatus.OK))
-    ab = _refine(lambda x: arcs.point(arc, x)[0], arcs.V, arcs.N, P, L, eta, u_ok,
+    f_b, st_b, g_b = (x[0] for x in bracket_objective(V, N, P, L, arcs.point(arc, u_b)[0][None], eta))
+    bracket = ~onset | (root_between((f_ok, g_ok), (f_b, g_b)) & (st_b == ObjectiveStatus.OK))
+    ab = _refine(lambda x: arcs.point(arc, x)[0], V, N, P, L, eta, u_ok,
                  jnp.where(onset, u_b, u_far), f_ok, iters)
     return ab, bracket
 
@@ -252,7 +201,7 @@ def _refine_brackets(mesh, P, L, faces, arc, i, kind, eta, samples, iters):
     a = jnp.clip(ab[:, 0], 0, 1)
     ab = jnp.stack([a, jnp.clip(ab[:, 1], 0, 1 - a)], -1)
     V, N = mesh.triangle(faces)
-    fa, st, _ = jax.vmap(lambda v, n, p, l, x: _f(v, n, p, l, x[None], eta))(V, N, P, L, ab)
+    fa, st, _ = jax.vmap(lambda v, n, p, l, x: bracket_objective(v, n, p, l, x[None], eta))(V, N, P, L, ab)
     # f is a sine: it also vanishes where the refracted ray points straight away from L
     # (an angle error of pi). Only a forward ray is a solution.
     _, _, _, w_L, _ = path_vectors(V, N, P, L, ab)
@@ -261,14 +210,7 @@ def _refine_brackets(mesh, P, L, faces, arc, i, kind, eta, samples, iters):
     return barycentric_point(V, ab), ab, ok & forward, fa[:, 0], st[:, 0]
 
 
-def _padded(idx, size):
-    """`idx` padded with its first entry to `size` (one compile per size class)."""
-    return np.concatenate([idx, np.full(size - len(idx), idx[0] if len(idx) else 0, idx.dtype)])
-
-
-def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: int = 60,
-                     tol: float = 1e-9, chunk: int = 4096, dedupe: float = 1e-7,
-                     return_all: bool = False):
+def solve_exhaustive(mesh, P, L, eta, start, options: Exhaustive, padded=None):
     """`solve(..., method="exhaustive")`: all solutions (float64); see the module docstring.
 
     Returns a `Solution` (the solution nearest `M0`, or nearest the line `PL` where the
@@ -279,12 +221,9 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     """
     if mesh.dtype != jnp.float64:
         raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
-    if samples < 2 or iters < 1:
-        raise ValueError("samples must be >= 2 and iters >= 1")
-    from ._solve import _bucket, bucketed
-
+    samples, iters, tol, chunk = options.samples, options.iters, options.tol, options.chunk
     face0, ab0, found0 = start if start is not None else start_points(mesh, P, L)
-    mesh_b = bucketed(mesh)
+    mesh_b = padded if padded is not None else padded_mesh(mesh)
     n = P.shape[0]
     n_faces = mesh.faces.shape[0]
     lanes, faces = [], []
@@ -300,7 +239,7 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     slot_pair, slot_arc, slot_i, slot_kind = [], [], [], []
     for i in range(0, len(lanes), chunk):
         li, fi = lanes[i:i + chunk], faces[i:i + chunk]
-        sel = _padded(np.arange(len(li)), _bucket(len(li), 64))
+        sel = padded_index(np.arange(len(li)), power_of_two_bucket(len(li), 64))
         valid, arc, j = (np.asarray(x)[:len(li)] for x in _scan_brackets(
             mesh_b, P[li[sel]], L[li[sel]], jnp.asarray(fi[sel]), eta, samples))
         pair, slot = np.nonzero(valid)
@@ -314,13 +253,13 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     pts, tris, res, abs_ = [], [], [], []
     for i in range(0, len(slot_pair), chunk):
         sl = np.arange(i, min(i + chunk, len(slot_pair)))
-        sel = _padded(sl, _bucket(len(sl), 64))
+        sel = padded_index(sl, power_of_two_bucket(len(sl), 64))
         pair = slot_pair[sel]
         M, ab, ok, fa, st = (np.asarray(x)[:len(sl)] for x in _refine_brackets(
             mesh_b, P[lanes[pair]], L[lanes[pair]], jnp.asarray(faces[pair]),
             jnp.asarray(slot_arc[sel]), jnp.asarray(slot_i[sel]), jnp.asarray(slot_kind[sel]),
             eta, samples, iters))
-        ok = ok & (np.abs(fa) <= tol) & (st == 0)
+        ok = ok & (np.abs(fa) <= tol) & (st == ObjectiveStatus.OK)
         pts.append(M[ok])
         abs_.append(ab[ok])
         tris.append(faces[pair[:len(sl)]][ok])
@@ -334,7 +273,7 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     # test it directly, as the walk does.
     f0, st0 = (np.asarray(x) for x in _f_status_points(mesh, jnp.asarray(np.maximum(np.asarray(face0), 0)),
                                                         jnp.asarray(ab0), P, L, eta))
-    at_m0 = np.nonzero(np.asarray(found0) & (np.abs(f0) <= tol) & (st0 == 0))[0]
+    at_m0 = np.nonzero(np.asarray(found0) & (np.abs(f0) <= tol) & (st0 == ObjectiveStatus.OK))[0]
     V0, _ = mesh.triangle(face0)
     M0 = np.asarray(barycentric_point(V0, ab0))
     pts = np.concatenate([pts, M0[at_m0]])
@@ -349,7 +288,7 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
     order = np.lexsort((pts[:, 0], owner)) if len(pts) else np.zeros(0, int)
     for k in order:
         lane = owner[k]
-        if all(np.linalg.norm(pts[k] - q) > dedupe for q in per_lane_pts[lane]):
+        if all(np.linalg.norm(pts[k] - q) > options.dedupe for q in per_lane_pts[lane]):
             per_lane_pts[lane].append(pts[k])
             per_lane_tri[lane].append(tris[k])
             per_lane_ab[lane].append(abs_[k])
@@ -392,7 +331,7 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
         crossed=jnp.zeros(n, jnp.int32),
         start_point=jnp.asarray(np.where(found0[:, None], M0, 0)),
     )
-    if return_all:
+    if options.return_all:
         return ExhaustiveSolution(sol, all_points, all_tris, count)
     return sol
 
@@ -401,11 +340,11 @@ def solve_exhaustive(mesh, P, L, eta, *, start=None, samples: int = 32, iters: i
 def _f_status_points(mesh, faces, ab, P, L, eta):
     """`f` and the walk's status (OK = 0 only for a forward refracted ray) at `(face, ab)`."""
     V, N = mesh.triangle(faces)
-    f, st, _ = jax.vmap(lambda v, n, p, l, a: _f(v, n, p, l, a[None], eta))(V, N, P, L, ab)
+    f, st, _ = jax.vmap(lambda v, n, p, l, a: bracket_objective(v, n, p, l, a[None], eta))(V, N, P, L, ab)
     return f[:, 0], st[:, 0]
 
 
 @jax.jit
 def _f_points(mesh, faces, ab, P, L, eta):
     V, N = mesh.triangle(faces)
-    return jax.vmap(lambda v, n, p, l, a: _f(v, n, p, l, a[None], eta)[0][0])(V, N, P, L, ab)
+    return jax.vmap(lambda v, n, p, l, a: bracket_objective(v, n, p, l, a[None], eta)[0][0])(V, N, P, L, ab)

@@ -15,14 +15,17 @@ triangle; the found solution nearest `M0` is returned.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ..arcs import inside as inside_triangle
 from ..barycentric import barycentric_point, edge_barycentric
+from ..lanes import map_lanes
 from ..mesh import cross_edge
 from ..objectives import (
     ObjectiveStatus,
@@ -31,23 +34,29 @@ from ..objectives import (
     signed_sine_and_status,
 )
 from ._solution import Solution, Status
-from .walk import default_tol
+from .options import SolverOptions, check_choice, check_int, check_tol
 
 SOLVERS = ("newton", "chord", "dogleg", "levenberg_marquardt")
 CONSTRAINTS = {"half_vector": half_vector_residual, "angle_difference": angle_difference_residual}
 
 
-class NewtonOptions(NamedTuple):
-    """Static options of the Newton baselines (hashable).
+@dataclasses.dataclass(frozen=True)
+class Newton(SolverOptions):
+    """Newton-type manifold solvers (MNEE / SMS) on optimistix, and their options.
 
     solver: "newton", "chord", "dogleg" or "levenberg_marquardt" (optimistix solvers).
     constraint: "half_vector" (MNEE) or "angle_difference" (SMS).
-    tol: acceptance `|f| <= tol` on the signed sine (None: as the walk).
-    inner_steps: optimistix steps per triangle patch.
-    max_patches: cap on patches (triangle changes and restarts) per lane.
-    n_starts: 1 = start at `M0` only; more adds uniform starts in the start triangle.
-    seed: for the extra starts.
+    tol: acceptance `|f| <= tol` on the signed sine, in `(0, 1)` (None: as the walk). Traced.
+    inner_steps: optimistix steps per triangle patch, in `[1, 1024]`.
+    max_patches: cap on patches (triangle changes and restarts) per lane, in
+        `[1, 2^31 - 1]`. Traced.
+    n_starts: 1 = start at `M0` only; more adds uniform starts in the start triangle
+        (SMS-style), in `[1, 1024]`.
+    seed: for the extra starts, in `[0, 2^31 - 1]`.
     """
+
+    method: ClassVar[str] = "newton"
+    traced: ClassVar[tuple[str, ...]] = ("tol", "max_patches")
 
     solver: str = "newton"
     constraint: str = "half_vector"
@@ -56,6 +65,21 @@ class NewtonOptions(NamedTuple):
     max_patches: int = 64
     n_starts: int = 1
     seed: int = 0
+
+    def _validate(self):
+        check_choice("solver", self.solver, SOLVERS)
+        check_choice("constraint", self.constraint, tuple(CONSTRAINTS))
+        object.__setattr__(self, "tol", check_tol("tol", self.tol))
+        for name, hi in (("inner_steps", 1024), ("max_patches", 2**31 - 1), ("n_starts", 1024)):
+            object.__setattr__(self, name, check_int(name, getattr(self, name), 1, hi))
+        object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
+
+    def check_dtype(self, dtype) -> None:
+        """optimistix 0.1.0's trust-region state is created in the default float dtype, so
+        with x64 on it mixes float64 into a float32 solve and lineax rejects it."""
+        if (self.solver in ("dogleg", "levenberg_marquardt") and jnp.dtype(dtype) == jnp.float32
+                and jax.config.jax_enable_x64):
+            raise ValueError(f"solver={self.solver!r} needs float64 or jax_enable_x64 off in float32")
 
 
 def _make_solver(name: str, tol: float):
@@ -87,10 +111,6 @@ def _exit_edge(ab, ab_new):
     return k, jnp.clip(t, 0, 1), lam
 
 
-def _inside(ab, slack):
-    return (ab[0] >= -slack) & (ab[1] >= -slack) & (ab[0] + ab[1] <= 1 + slack)
-
-
 class _State(NamedTuple):
     face: jax.Array
     ab: jax.Array
@@ -101,7 +121,7 @@ class _State(NamedTuple):
     crossed: jax.Array
 
 
-def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, options: NewtonOptions):
+def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, options: Newton):
     dtype = mesh.dtype
     solver = _make_solver(options.solver, tol)
     residual = CONSTRAINTS[options.constraint]
@@ -118,7 +138,7 @@ def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, options: N
         ab_new = sol.value
         finite = jnp.all(jnp.isfinite(ab_new))
         ab_new = jnp.where(finite, ab_new, s.ab)
-        inside = _inside(ab_new, slack)
+        inside = inside_triangle(ab_new, slack)
         k, t, _ = _exit_edge(s.ab, ab_new)
         g, _, _, ab_entry = cross_edge(mesh, s.face, k, t)
         left = ~inside & (g < 0)
@@ -155,7 +175,7 @@ def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, options: N
 
 @functools.partial(jax.jit, static_argnames=("options",))
 def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
-                  options: NewtonOptions) -> Solution:
+                  options: Newton) -> Solution:
     eta = jnp.asarray(eta, mesh.dtype)
     tol = jnp.asarray(tol, mesh.dtype)
     n = P.shape[0]
@@ -166,8 +186,6 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
     else:
         starts = ab0[:, None]
     lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, tol, max_patches, options)  # noqa: E731
-    from ._solve import map_lanes
-
     per_start = jax.vmap(lambda a: map_lanes(lane, P, L, face, a, found), in_axes=1, out_axes=1)
     states, f_end = per_start(starts)  # leaves (n, S, ...)
     V, N = mesh.triangle(states.face)
@@ -192,32 +210,8 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
     )
 
 
-def newton_options(dtype, **options) -> NewtonOptions:
-    """Validated `NewtonOptions` (raises `ValueError` naming the bad option)."""
-    try:
-        opts = NewtonOptions(**options)
-    except TypeError as exc:
-        raise ValueError(f"unknown newton option: {exc}") from exc
-    if opts.solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {SOLVERS}, got {opts.solver!r}")
-    if opts.constraint not in CONSTRAINTS:
-        raise ValueError(f"constraint must be one of {tuple(CONSTRAINTS)}, got {opts.constraint!r}")
-    if opts.inner_steps < 1 or opts.max_patches < 1 or opts.n_starts < 1:
-        raise ValueError("inner_steps, max_patches and n_starts must be >= 1")
-    if (opts.solver in ("dogleg", "levenberg_marquardt") and jnp.dtype(dtype) == jnp.float32
-            and jax.config.jax_enable_x64):
-        # optimistix 0.1.0's trust-region state is created in the default float dtype, so
-        # with x64 on it mixes float64 into a float32 solve and lineax rejects it.
-        raise ValueError(f"solver={opts.solver!r} needs float64 or jax_enable_x64 off in float32")
-    return opts
-
-
-def solve_newton(mesh, P, L, eta, start, opts: NewtonOptions) -> Solution:
-    """`solve(..., method="newton")` on validated input: see the module docstring."""
-    from ._solve import bucketed
-
+def solve_newton(mesh, P, L, eta, start, opts: Newton) -> Solution:
+    """The Newton baselines on a padded batch (see `walk.solve_walk` for the arguments)."""
     face, ab0, found = start
-    tol = opts.tol if opts.tol is not None else default_tol(mesh.dtype)
-    static = opts._replace(tol=None, max_patches=0)  # traced: one compile for any value
-    return _newton_batch(bucketed(mesh), P, L, face, ab0, found, eta, tol,
-                         jnp.int32(opts.max_patches), static)
+    return _newton_batch(mesh, P, L, face, ab0, found, eta, opts.tolerance(mesh.dtype),
+                         jnp.int32(opts.max_patches), opts.static())

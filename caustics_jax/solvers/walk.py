@@ -27,49 +27,63 @@ angle between the refracted direction and `w_L`, so `tol` bounds the angle error
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import dataclasses
+import functools
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..conic import (
-    conic_coefficients,
-    conic_second_intersection,
-    conic_tangent,
-    conic_value,
-    edge_intersection_points,
-    edge_intersections,
-    solve_quadratic,
+from ..arcs import (
+    INWARD,
+    edge_roots,
+    inside,
+    next_crossing,
+    opposite,
+    orientation,
+    pencil_point,
+    project_to_conic,
+    root_between,
 )
+from ..barycentric import barycentric_point
+from ..conic import conic_coefficients, conic_tangent
+from ..lanes import map_lanes
 from ..mesh import SurfaceMesh, cross_edge
-from ..objectives import ObjectiveStatus, path_vectors, refracted_direction, signed_sine_and_status
-from ._solution import Status
+from ..objectives import ObjectiveStatus, bracket_objective, path_vectors, signed_sine
+from ._solution import Solution, Status
+from .options import SolverOptions, check_choice, check_int, check_tol, default_tol
+
+__all__ = ["Walk", "default_tol", "solve_walk", "walk_lane"]
 
 WALK, BISECT, DONE = 0, 1, 2
-_BACKWARD = max(ObjectiveStatus) + 1  # walk-local objective status: refracted ray points away from L
-# Inward normal of each edge in barycentric space: b = 0 -> +b, a + b = 1 -> -(a + b), a = 0 -> +a.
-_INWARD = ((0.0, 1.0), (-1.0, -1.0), (1.0, 0.0))
 
 
-class WalkOptions(NamedTuple):
-    """Static options of the walk (hashable).
+@dataclasses.dataclass(frozen=True)
+class Walk(SolverOptions):
+    """The curve walk of seed 001 §3.4 and its options (`solve(..., method=Walk(...))`).
 
-    tol: accept a point when `|f| <= tol` (None: 1e-10 in float64, 1e-5 in float32, from
-        the float32 audit's 1e-6 noise floor of `f`).
-    max_steps: cap on crossings plus refinement steps per lane.
+    tol: accept a point when `|f| <= tol`, in `(0, 1)` (None: 1e-10 in float64, 1e-5 in
+        float32, from the float32 audit's 1e-6 noise floor of `f`). Traced.
+    max_steps: cap on crossings plus refinement steps per lane, in `[1, 2^31 - 1]`. Traced.
     bracket: "illinois" (false position with the Illinois fix) or "bisection" (the paper).
-    ellipse_samples: pencil samples of an ellipse inside the first triangle (§3.4.4).
+    ellipse_samples: pencil samples of an ellipse inside the first triangle (§3.4.4),
+        in `[2, 4096]`.
     """
+
+    method: ClassVar[str] = "walk"
+    traced: ClassVar[tuple[str, ...]] = ("tol", "max_steps")
 
     tol: float | None = None
     max_steps: int = 512
     bracket: str = "illinois"
     ellipse_samples: int = 64
 
-
-def default_tol(dtype) -> float:
-    return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
+    def _validate(self):
+        object.__setattr__(self, "tol", check_tol("tol", self.tol))
+        object.__setattr__(self, "max_steps", check_int("max_steps", self.max_steps, 1))
+        check_choice("bracket", self.bracket, ("illinois", "bisection"))
+        object.__setattr__(self, "ellipse_samples", check_int("ellipse_samples", self.ellipse_samples, 2, 4096))
 
 
 class _State(NamedTuple):
@@ -102,107 +116,10 @@ def _frame(mesh, face, P, L):
     return V, N, conic_coefficients(V, N, P, L)
 
 
-def _orientation(coef, e, tau):
-    """Unit travel direction and `sigma`-signed normal, so curve points have `phi` in (0, pi)."""
-    tau = tau / jnp.maximum(jnp.linalg.norm(tau), jnp.finfo(tau.dtype).tiny)
-    A, B, C = coef[0], coef[1], coef[2]
-    t = conic_tangent(coef, e)
-    grad = jnp.stack([t[1], -t[0]])  # half the gradient (u, v)
-    c2 = A * tau[0] ** 2 + B * tau[1] ** 2 + C * tau[0] * tau[1]
-    bend = -jnp.sign(c2) * grad
-    cross = tau[0] * bend[1] - tau[1] * bend[0]
-    sigma = jnp.where(cross < 0, -1, 1).astype(tau.dtype)
-    perp = sigma * jnp.stack([-tau[1], tau[0]])
-    return tau, perp
-
-
-def _edge_roots(coef):
-    t, valid = edge_intersections(coef)
-    return t, valid, edge_intersection_points(t)  # (3, 2), (3, 2), (3, 2, 2)
-
-
-def _next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
-    """The first edge root met when travelling along the conic from `e` in direction `tau`.
-
-    Excluded as candidates: roots within `64 eps` of `e` (a vertex root reported on two
-    edges), and on the entry edge the root nearest the entry parameter when it is within
-    `8 sqrt(eps)` of it (the entry point itself, recomputed in this triangle's conic).
-    """
-    t, valid, ab = roots
-    eps = float(np.finfo(t.dtype).eps)
-    v = ab - e
-    dist = jnp.linalg.norm(v, axis=-1)
-    cand = valid & (dist > 64 * eps)
-    on_entry = jnp.arange(3)[:, None] == entry_edge
-    gap = jnp.where(on_entry & valid, jnp.abs(t - entry_t), jnp.inf)
-    nearest = gap == jnp.min(gap)
-    cand = cand & ~(nearest & (gap < 8 * np.sqrt(eps)))
-    along, across = v @ tau, v @ perp
-    phi = jnp.arctan2(across, along)
-    phi = jnp.where(phi < 0, phi + jnp.pi, phi)  # the cutting line's angle, in [0, pi)
-    # On the tangent line itself (a straight curve: constant normals, a flat surface) the
-    # line angle is 0 or pi only up to rounding; there, ahead comes first (nearest first)
-    # and behind comes last.
-    on_tangent = jnp.abs(across) <= 1e3 * eps * dist
-    phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
-    phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
-    i = jnp.argmin(phi)
-    return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
-
-
-def _project_to_conic(coef, q):
-    """The conic point nearest `q` along the gradient direction at `q` (one exact line cut)."""
-    t = conic_tangent(coef, q)
-    n = jnp.stack([t[1], -t[0]])
-    n = n / jnp.maximum(jnp.linalg.norm(n), jnp.finfo(n.dtype).tiny)
-    A, B, C, D, E, F = coef
-    q2 = A * n[0] ** 2 + B * n[1] ** 2 + C * n[0] * n[1]
-    q1 = (2 * A * q[0] + C * q[1] + D) * n[0] + (2 * B * q[1] + C * q[0] + E) * n[1]
-    h, ok = solve_quadratic(q2, q1, conic_value(coef, q))
-    h = jnp.where(ok, h, jnp.inf)
-    h_min = jnp.where(jnp.abs(h[0]) < jnp.abs(h[1]), h[0], h[1])
-    return q + jnp.where(jnp.isfinite(h_min), h_min, 0) * n
-
-
-def _pencil_point(coef, anchor, tau, perp, phi):
-    d = jnp.cos(phi) * tau + jnp.sin(phi) * perp
-    return conic_second_intersection(coef, anchor, d)
-
-
-def _f(V, N, P, L, ab, eta):
-    """`f`, status, and `f` under the "line" orientation at points `ab` `(k, 2)`, batched.
-
-    One call site per step keeps the compiled program small (XLA compile time grows with
-    every inlined copy). The plane orientation: the paper's tangent sign is rounding noise
-    on gentle waves (`signed_sine_and_status`).
-    """
-    def one(x):
-        f, st = signed_sine_and_status(V, N, P, L, x, eta, orientation="plane")
-        g, _ = signed_sine_and_status(V, N, P, L, x, eta, orientation="line")
-        # f is a sine: it also vanishes where the refracted ray points away from L (angle
-        # pi), and changes sign there in both orientations. Such points are no solution
-        # (as in the exhaustive reference); a status other than OK keeps them out of
-        # every bracket and acceptance, and the walk goes on through them as through TIR.
-        _, _, _, w_L, _ = path_vectors(V, N, P, L, x)
-        backward = (st == ObjectiveStatus.OK) & (jnp.sum(refracted_direction(V, N, P, L, x, eta) * w_L) <= 0)
-        return f, jnp.where(backward, _BACKWARD, st), g
-
-    return jax.vmap(one)(ab)
-
-
 def _cos_at_P(V, N, P, L, ab):
     """`-w_P . n_s` at points `ab` `(k, 2)`: the cosine of incidence on P's side."""
     _, n_s, w_P, _, _ = path_vectors(V, N, P, L, ab)
     return -jnp.sum(w_P * n_s, axis=-1)
-
-
-def _root_between(fg1, fg2):
-    """A sign change of `f` in both orientations: a root, not an orientation flip."""
-    return _opposite(fg1[0], fg2[0]) & _opposite(fg1[1], fg2[1])
-
-
-def _opposite(f1, f2):
-    return jnp.sign(f1) * jnp.sign(f2) < 0
 
 
 def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
@@ -216,7 +133,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     V, N, coef = _frame(mesh, face, P, L)
     t0 = conic_tangent(coef, ab0)
     singular = jnp.linalg.norm(t0) == 0
-    roots = _edge_roots(coef)
+    roots = edge_roots(coef)
 
     # The paper's sign of f flips at M0 (where M crosses the line PL); the "plane"
     # orientation does not, but each direction still starts its bracket a little off M0
@@ -224,11 +141,11 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     delta0 = 1e4 * float(np.finfo(dtype).eps)
     dirs = []
     for s in (1.0, -1.0):
-        tau, perp = _orientation(coef, ab0, s * t0)
-        ok, k, t, ab, phi = _next_crossing(roots, ab0, tau, perp)
+        tau, perp = orientation(coef, ab0, s * t0)
+        ok, k, t, ab, phi = next_crossing(roots, ab0, tau, perp)
         room = jnp.linalg.norm(ab - ab0)
         delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
-        near = _project_to_conic(coef, ab0 + delta * tau)
+        near = project_to_conic(coef, ab0 + delta * tau)
         v = near - ab0
         phi_s = jnp.arctan2(v @ perp, v @ tau)
         phi_s = jnp.clip(phi_s, 0, jnp.where(ok, phi / 2, jnp.pi / 2))
@@ -237,11 +154,12 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     (okm, km, tm, abm, phim, taum, perpm, phism, nearm, roomm) = dirs[1]
 
     # Ellipse inside the triangle: sample the whole curve through the pencil at M0.
-    tau_e, perp_e = _orientation(coef, ab0, t0)
+    tau_e, perp_e = orientation(coef, ab0, t0)
     phis = jnp.pi * jnp.arange(1, n_ellipse, dtype=dtype) / n_ellipse
-    pts, pts_ok = jax.vmap(lambda p: _pencil_point(coef, ab0, tau_e, perp_e, p))(phis)
+    pts, pts_ok = jax.vmap(lambda p: pencil_point(coef, ab0, tau_e, perp_e, p))(phis)
 
-    f_all, st_all, g_all = _f(V, N, P, L, jnp.concatenate([jnp.stack([ab0, abp, abm, nearp, nearm]), pts]), eta)
+    pts_all = jnp.concatenate([jnp.stack([ab0, abp, abm, nearp, nearm]), pts])
+    f_all, st_all, g_all = bracket_objective(V, N, P, L, pts_all, eta)
     gp, gm, gsp, gsm = g_all[1], g_all[2], g_all[3], g_all[4]
     f0, fp, fm, fsp, fsm = f_all[:5]
     st0, stp, stm = st_all[0], st_all[1], st_all[2]
@@ -252,8 +170,8 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     gsm = jnp.where(okm & (roomm < 4 * delta0), gm, gsm)
 
     OK = ObjectiveStatus.OK
-    br_p = okp & _root_between((fsp, gsp), (fp, gp)) & (stp == OK) & (st_all[3] == OK)
-    br_m = okm & _root_between((fsm, gsm), (fm, gm)) & (stm == OK) & (st_all[4] == OK)
+    br_p = okp & root_between((fsp, gsp), (fp, gp)) & (stp == OK) & (st_all[3] == OK)
+    br_m = okm & root_between((fsm, gsm), (fm, gm)) & (stm == OK) & (st_all[4] == OK)
     use_m_bracket = br_m & (~br_p | (phim < phip))
     # Walk direction without a bracket: out of total internal reflection first (towards
     # the larger cosine at P's side), else towards the smaller |f|.
@@ -272,7 +190,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     gs = jnp.concatenate([gsp[None], g_all[5:], gsm[None]])
     sts = jnp.concatenate([st_all[3:4], st_all[5:], st_all[4:5]])
     ok_all = jnp.concatenate([jnp.ones(1, bool), pts_ok, jnp.ones(1, bool)]) & (sts == ObjectiveStatus.OK)
-    change = _root_between((fs_all[:-1], gs[:-1]), (fs_all[1:], gs[1:])) & ok_all[:-1] & ok_all[1:]
+    change = root_between((fs_all[:-1], gs[:-1]), (fs_all[1:], gs[1:])) & ok_all[:-1] & ok_all[1:]
     j = jnp.argmax(change)
     ellipse_bracket = change[j]
 
@@ -342,10 +260,10 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
 def _walk_geometry(mesh, coef, g, k_in, t_in, e):
     """Enter face `g` at `e` (entry edge `k_in`): inward travel direction, next crossing."""
     t = conic_tangent(coef, e)
-    inward = jnp.asarray(_INWARD, t.dtype)[jnp.clip(k_in, 0, 2)]
+    inward = jnp.asarray(INWARD, t.dtype)[jnp.clip(k_in, 0, 2)]
     side = t @ inward
-    tau, perp = _orientation(coef, e, jnp.where(side < 0, -t, t))
-    ok, k, tt, ab, phi = _next_crossing(_edge_roots(coef), e, tau, perp, k_in, t_in)
+    tau, perp = orientation(coef, e, jnp.where(side < 0, -t, t))
+    ok, k, tt, ab, phi = next_crossing(edge_roots(coef), e, tau, perp, k_in, t_in)
     return side, tau, perp, ok, k, tt, ab, phi
 
 
@@ -357,7 +275,7 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     e_ok, x_ok = st_e == ObjectiveStatus.OK, stx == ObjectiveStatus.OK
     found_e = e_ok & (jnp.abs(f_e) <= tol)
     found_x = ok & x_ok & (jnp.abs(fx) <= tol)
-    bracket = ok & e_ok & x_ok & _root_between((f_e, g2[0]), (fx, g2[1]))
+    bracket = ok & e_ok & x_ok & root_between((f_e, g2[0]), (fx, g2[1]))
     lost = ~ok | (side == 0)
     # An arc from a transmitting point to a totally reflecting one (or back) may hold a
     # root between the transmitting end and the onset of TIR, where neither end shows a
@@ -387,15 +305,10 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     )
 
 
-def _inside(ab):
-    slack = 64 * jnp.finfo(ab.dtype).eps
-    return (ab[0] >= -slack) & (ab[1] >= -slack) & (ab[0] + ab[1] <= 1 + slack)
-
-
 def _chord_point(coef, ab_lo, ab_hi, lam):
     """Curve point cut by the normal line at `lam` along the chord (well-conditioned on short arcs)."""
     q = ab_lo + lam * (ab_hi - ab_lo)
-    p = _project_to_conic(coef, q)
+    p = project_to_conic(coef, q)
     chord = ab_hi - ab_lo
     along = (p - ab_lo) @ chord
     ok = (along > 0) & (along < chord @ chord)
@@ -418,12 +331,12 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
         lam = jnp.where(denom != 0, jnp.clip(frac, 1e-6, 1 - 1e-6), 0.5)
         lam = jnp.where(s.tir_end != 0, 0.5, lam)  # f is 0 at a TIR end: no false position
     phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
-    p_pencil, ok_pencil = _pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
+    p_pencil, ok_pencil = pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
     # The bracketed arc lies in the triangle; a cut landing outside it hit another piece
     # of the conic (possible for the chord cut near a tangency with an edge).
-    ok_pencil = ok_pencil & _inside(p_pencil)
-    ok_chord = ok_chord & _inside(p_chord)
+    ok_pencil = ok_pencil & inside(p_pencil)
+    ok_chord = ok_chord & inside(p_chord)
     p = jnp.where(ok_chord, p_chord, p_pencil)
     v = p - s.anchor
     phi = jnp.where(ok_chord, jnp.arctan2(v @ s.perp, v @ s.tau), phi_try)
@@ -435,12 +348,12 @@ def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _Stat
     searching = s.tir_end != 0
     tir_mid = searching & (stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
     ok = ok & (transmits | tir_mid)
-    to_hi = _opposite(fm, s.f_lo)  # the root lies between lo and p: p becomes the new hi
+    to_hi = opposite(fm, s.f_lo)  # the root lies between lo and p: p becomes the new hi
     # TIR search (`_walk_update`): p replaces the TIR end when it reflects too, or when f
     # changed sign against the transmitting end (then [that end, p] is a plain bracket);
     # otherwise p replaces the transmitting end, closing in on the onset of TIR.
     f_ok_end = jnp.where(s.tir_end > 0, s.f_lo, s.f_hi)
-    flipped = transmits & _opposite(fm, f_ok_end)
+    flipped = transmits & opposite(fm, f_ok_end)
     replace_tir_end = tir_mid | flipped
     to_hi = jnp.where(searching, jnp.where(s.tir_end > 0, replace_tir_end, ~replace_tir_end), to_hi)
     tir_end = jnp.where(flipped, 0, s.tir_end)
@@ -498,13 +411,13 @@ def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     p, phi, ok = _bisect_geometry(coef, s, illinois)
     ab_x = walk_geo[6]
     pts = jnp.where(walking, jnp.stack([e, ab_x]), jnp.stack([p, p]))
-    f2, st2, g2 = _f(V, N, P, L, pts, eta)
+    f2, st2, g2 = bracket_objective(V, N, P, L, pts, eta)
     walked = _walk_update(s, g, e, walk_geo, f2, st2, g2, tol)
     refined = _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
     return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
 
 
-def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptions,
+def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: Walk,
               tol, max_steps):
     """Walk one lane (vmapped by `solve`); returns the final `_State`.
 
@@ -535,3 +448,34 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: WalkOptio
         lambda c: (c[0].mode != DONE) & (c[0].steps < max_steps), body, (state, jnp.asarray(False)))
     capped = state.mode != DONE
     return state._replace(status=jnp.where(capped, Status.MAX_STEPS, state.status).astype(jnp.int32))
+
+
+@functools.partial(jax.jit, static_argnames=("options",))
+def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk) -> Solution:
+    eta = jnp.asarray(eta, mesh.dtype)
+    tol = jnp.asarray(tol, mesh.dtype)
+    states = map_lanes(
+        lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps),
+        P, L, face, ab0, found)
+    V, N = mesh.triangle(states.face)
+    residual = signed_sine(V, N, P, L, states.best_ab, eta, orientation="plane")
+    V0, _ = mesh.triangle(face)
+    return Solution(
+        point=jnp.where(found[:, None], barycentric_point(V, states.best_ab), 0),
+        triangle=jnp.where(found, states.face, -1),
+        barycentric=jnp.where(found[:, None], states.best_ab, 0),
+        found=states.status == Status.FOUND,
+        status=states.status,
+        iterations=states.steps,
+        residual=jnp.where(found, residual, 0),
+        crossed=states.crossed,
+        start_point=jnp.where(found[:, None], barycentric_point(V0, ab0), 0),
+    )
+
+
+def solve_walk(mesh: SurfaceMesh, P, L, eta, start, options: Walk) -> Solution:
+    """The walk on a padded batch: `mesh` from `lanes.padded_mesh`, lanes from
+    `lanes.pad_lanes`, `start = (face, barycentric, found)`; `eta` a float."""
+    face, ab0, found = start
+    return _walk_batch(mesh, P, L, face, ab0, found, eta, options.tolerance(mesh.dtype),
+                       jnp.int32(options.max_steps), options.static())

@@ -33,11 +33,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ..barycentric import barycentric_point
+from ..barycentric import barycentric_coordinates, barycentric_point
+from ..features import check as check_features
 from ..geometry import dot, fresnel_transmittance, norm, safe_normalize
+from ..lanes import compact_index, scatter_lanes
 from ..mesh import SurfaceMesh
 from ..objectives import path_vectors
-from .differentials import _edge_coordinates, ray_differential_D
+from ..prepared import PreparedSurface, prepare
+from ..solvers import solve
+from .differentials import ray_differential_D
 
 
 @jax.jit
@@ -85,7 +89,7 @@ def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
     return n_P
 
 
-def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiver_normal,
+def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: float = 1.333, receiver_normal,
                method: str = "walk", sigma_t: float = 0.0, all_paths: bool = False,
                return_solution: bool = False, features="auto", **options):
     """Caustic irradiance (W/m^2) at receivers `P` from a point light at `L` through the surface.
@@ -113,10 +117,6 @@ def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiv
     `(E, Solution)` with `return_solution`). Per path: `path_irradiance` (module
     docstring). Bad input raises `ValueError` before any solve.
     """
-    from ..features import check as check_features
-    from ..features import resolve as resolve_features
-    from ..solvers import solve
-
     intensity_np = np.asarray(intensity, np.float64)
     if not np.all(np.isfinite(intensity_np)) or np.any(intensity_np < 0):
         raise ValueError("intensity must be finite and >= 0")
@@ -130,13 +130,14 @@ def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiv
     n_P = _check_receiver_normal(receiver_normal, n)
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
-    dtype = mesh.dtype
+    prep = prepare(mesh)
+    mesh, dtype = prep.mesh, prep.dtype
     if all_paths:
         res = solve(mesh, P, L, eta=eta, method="exhaustive", return_all=True, **options)
         E = _sum_all_paths(mesh, res, P, L, eta, intensity_np, n_P, sigma_t)
         return (E, res.solution) if return_solution else E
-    feats = resolve_features(features, mesh)
-    sol = solve(mesh, P, L, eta=eta, method=method, features=feats, **options)
+    feats = prep.features if isinstance(features, str) else features
+    sol = solve(prep, P, L, eta=eta, method=method, features=feats, **options)
     P_b = jnp.broadcast_to(jnp.asarray(P, dtype).reshape(-1, 3), (n, 3))
     L_b = jnp.broadcast_to(jnp.asarray(L, dtype).reshape(-1, 3), (n, 3))
     if feats is not None and feats.compact_lanes:
@@ -152,8 +153,6 @@ def irradiance(mesh: SurfaceMesh, P, L, *, intensity, eta: float = 1.333, receiv
 def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
     """`path_irradiance` (D factor included) on the found lanes only, compacted, then
     scattered into zeros: the general path's `where(found, E, 0)` without the work."""
-    from ..solvers._solve import compact_index, scatter_lanes
-
     n, dtype = P.shape[0], mesh.dtype
     E = jnp.zeros(n, dtype)
     idx = np.flatnonzero(np.asarray(sol.found))
@@ -177,7 +176,7 @@ def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t):
     n, width = tris.shape
     V, N = mesh.triangle(jnp.asarray(tris))
     E1, E2 = V[..., 1, :] - V[..., 0, :], V[..., 2, :] - V[..., 0, :]
-    ab = _edge_coordinates(E1, E2, jnp.asarray(pts) - V[..., 0, :])
+    ab = barycentric_coordinates(E1, E2, jnp.asarray(pts) - V[..., 0, :])
     P_b = jnp.broadcast_to(jnp.asarray(P, mesh.dtype).reshape(-1, 1, 3), (n, width, 3))
     L_b = jnp.broadcast_to(jnp.asarray(L, mesh.dtype).reshape(-1, 1, 3), (n, width, 3))
     I_b = jnp.broadcast_to(jnp.asarray(intensity, mesh.dtype).reshape(-1, 1), (n, width))

@@ -43,12 +43,12 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from ..barycentric import interpolated_normal
-from ..geometry import dot, norm, refract, safe_normalize
+from ..barycentric import barycentric_coordinates, interpolated_normal
+from ..geometry import dot, norm, refract, refraction_k, safe_div, safe_normalize
 from ..objectives import orthonormal_frame, path_vectors
 
 
-def _tiny(dtype):
+def validity_threshold(dtype):
     """Threshold for cosines and sines below which D is reported invalid.
 
     D's relative rounding error grows like `eps / cos` for each of these cosines (the
@@ -69,29 +69,9 @@ def _direction_frame(w_P):
     return orthonormal_frame(w_P)
 
 
-def _edge_coordinates(E1, E2, x):
-    """`(a, b)` with `x = a E1 + b E2`, least squares (the 2x2 Gram system).
-
-    For `x` in the triangle's plane this is exact; `det G = |E1 x E2|^2` (Lagrange's
-    identity) is evaluated from the cross product, without the cancellation of
-    `g11 g22 - g12^2` on thin triangles. Returns zeros where the triangle is degenerate.
-    """
-    g11, g12, g22 = dot(E1, E1), dot(E1, E2), dot(E2, E2)
-    r1, r2 = dot(E1, x), dot(E2, x)
-    det = dot(jnp.cross(E1, E2), jnp.cross(E1, E2))
-    ok = det > 0
-    inv = jnp.where(ok, 1 / jnp.where(ok, det, 1), 0)
-    return jnp.stack([(g22 * r1 - g12 * r2) * inv, (g11 * r2 - g12 * r1) * inv], -1)
-
-
 def _triangle_ok(E1, E2, tiny):
     """False for slivers: `|E1 x E2| <= tiny |E1| |E2|` (sine of the angle at V0)."""
     return norm(jnp.cross(E1, E2)) > tiny * norm(E1) * norm(E2)
-
-
-def _safe_div(x, y, ok):
-    """`x / y` where `ok`, 0 elsewhere, with finite values and gradients (double where)."""
-    return jnp.where(ok, x / jnp.where(ok, y, 1), 0)
 
 
 @jax.jit
@@ -127,7 +107,7 @@ def ray_differential_D(
     """
     M, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
     dtype = M.dtype
-    tiny = _tiny(dtype)
+    tiny = validity_threshold(dtype)
     eta = jnp.asarray(eta, dtype)
     E1 = V[..., 1, :] - V[..., 0, :]
     E2 = V[..., 2, :] - V[..., 0, :]
@@ -135,7 +115,7 @@ def ray_differential_D(
     n_g = safe_normalize(jnp.cross(E1, E2))
     n_len = norm(interpolated_normal(N, ab))
     cos_g, cos_P, cos_L = dot(w_P, n_g), dot(w_P, n_s), dot(w_L, n_s)
-    k = (1 - eta) * (1 + eta) + (eta * cos_P) ** 2  # refract's k: negative under TIR
+    k = refraction_k(cos_P, eta)  # negative under TIR
     ok_g, ok_L = jnp.abs(cos_g) > tiny, cos_L > tiny
     # refract(-w_P, -n_s, eta) needs P behind the shading normal (GLSL's dot(N, I) <= 0);
     # with the normal facing the other way GLSL's formula reflects instead (at eta = 1
@@ -147,12 +127,12 @@ def ray_differential_D(
     W = jnp.stack(_direction_frame(w_P), -2)
     s = lambda x: x[..., None, None]  # noqa: E731
     v = lambda x: x[..., None, :]  # noqa: E731
-    M_d = -s(d_P) * (W - s(_safe_div(1, cos_g, ok_g)) * dot(W, v(n_g))[..., None] * v(w_P))
-    ab_d = _edge_coordinates(v(E1), v(E2), M_d)
+    M_d = -s(d_P) * (W - s(safe_div(1, cos_g, ok_g)) * dot(W, v(n_g))[..., None] * v(w_P))
+    ab_d = barycentric_coordinates(v(E1), v(E2), M_d)
     n_tilde_d = ab_d[..., :1] * v(N[..., 1, :] - N[..., 0, :]) + ab_d[..., 1:] * v(N[..., 2, :] - N[..., 0, :])
-    n_s_d = (n_tilde_d - dot(v(n_s), n_tilde_d)[..., None] * v(n_s)) * s(_safe_div(1, n_len, n_len > 0))
+    n_s_d = (n_tilde_d - dot(v(n_s), n_tilde_d)[..., None] * v(n_s)) * s(safe_div(1, n_len, n_len > 0))
     mu = cos_L + eta * cos_P
-    mu_d = (eta**2 * cos_P * _safe_div(1, cos_L, ok_L) + eta)[..., None] * (dot(W, v(n_s)) + dot(v(w_P), n_s_d))
+    mu_d = (eta**2 * cos_P * safe_div(1, cos_L, ok_L) + eta)[..., None] * (dot(W, v(n_s)) + dot(v(w_P), n_s_d))
     w_L_d = -eta[..., None, None] * W + mu_d[..., None] * v(n_s) + s(mu) * n_s_d
     L_d = M_d - dot(M_d, v(w_L))[..., None] * v(w_L) + s(d_L) * w_L_d
     D = norm(jnp.cross(L_d[..., 0, :], L_d[..., 1, :]))
@@ -174,11 +154,11 @@ def _trace_to_light_plane(s, V, N, P, L, ab, eta):
     E1, E2 = V[1] - V[0], V[2] - V[0]
     n_g = jnp.cross(E1, E2)
     d_dot_n = dot(d, n_g)
-    X = P + _safe_div(dot(V[0] - P, n_g), d_dot_n, d_dot_n != 0) * d
-    n_s = safe_normalize(interpolated_normal(N, _edge_coordinates(E1, E2, X - V[0])))
+    X = P + safe_div(dot(V[0] - P, n_g), d_dot_n, d_dot_n != 0) * d
+    n_s = safe_normalize(interpolated_normal(N, barycentric_coordinates(E1, E2, X - V[0])))
     r = refract(d, -n_s, eta)
     r_dot_w = dot(r, w_L)
-    Y = X + _safe_div(dot(L - X, w_L), r_dot_w, r_dot_w != 0) * r
+    Y = X + safe_div(dot(L - X, w_L), r_dot_w, r_dot_w != 0) * r
     e1, e2 = orthonormal_frame(w_L)
     return jnp.stack([dot(Y - L, e1), dot(Y - L, e2)])
 

@@ -38,11 +38,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ..barycentric import interpolated_normal
-from ..geometry import dot, norm, reflect, refract, safe_normalize
+from ..barycentric import barycentric_coordinates, interpolated_normal
+from ..geometry import dot, norm, reflect, refract, safe_div, safe_normalize
 from ..mesh import SurfaceMesh
 from ..objectives import orthonormal_frame
-from .differentials import _edge_coordinates, _safe_div, _tiny
+from .differentials import validity_threshold
 from .photons import EmissionPlane, ReceiverGrid, refract_into_medium, surface_hits
 
 MODES = ("refract", "reflect")
@@ -75,7 +75,7 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     A = triangle_area(x00, x10, x01)
     A_d = triangle_area(hit0, hit1, hit2)
     ok = A > 0
-    sigma = jnp.sqrt(_safe_div(A_d, A, ok)) * jnp.asarray(scale, A.dtype) ** level
+    sigma = jnp.sqrt(safe_div(A_d, A, ok)) * jnp.asarray(scale, A.dtype) ** level
     return jnp.where(ok, sigma, 0), ok
 
 
@@ -106,7 +106,7 @@ def _to_plane(x, w, point, normal):
     """Ray `x + t w` on the plane `(point, normal)`: `(hit, t, ok)`; `ok` needs `t > 0`."""
     den = dot(w, normal)
     ok_den = jnp.abs(den) > 0
-    t = _safe_div(dot(point - x, normal), den, ok_den)
+    t = safe_div(dot(point - x, normal), den, ok_den)
     return x + t[..., None] * w, t, ok_den & (t > 0)
 
 
@@ -120,7 +120,7 @@ def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir
         ok = ok & hit
     A = triangle_area(x00, x10, x01)
     ok = ok & (A > 0)
-    return jnp.where(ok, _safe_div(triangle_area(*hits), A, ok), 0), ok
+    return jnp.where(ok, safe_div(triangle_area(*hits), A, ok), 0), ok
 
 
 def compression_ratio_exact(
@@ -161,7 +161,7 @@ def _texel_trace(uv, V, N, L, X, eta, point, normal):
     d = d_raw / r_e
     E1, E2 = V[1] - V[0], V[2] - V[0]
     M, _, ok_s = _to_plane(L, d, V[0], jnp.cross(E1, E2))
-    n_s = safe_normalize(interpolated_normal(N, _edge_coordinates(E1, E2, M - V[0])))
+    n_s = safe_normalize(interpolated_normal(N, barycentric_coordinates(E1, E2, M - V[0])))
     r, T, ok_n = refract_into_medium(d, n_s, eta)
     Y, t, ok_r = _to_plane(M, r, point, normal)
     e1, e2 = orthonormal_frame(normal)
@@ -211,10 +211,10 @@ def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, r
     J, Y, T, cos_e, r_e, t, ok = texel_jacobian(V, N, L, X, eta, receiver_point, receiver_normal)
     det = jnp.abs(J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0])
     scale = jnp.sum(J**2, axis=(-2, -1))
-    ok = ok & (det > _tiny(det.dtype) * scale)
+    ok = ok & (det > validity_threshold(det.dtype) * scale)
     dtype = det.dtype
     E = (jnp.asarray(intensity, dtype) * T * jnp.exp(-jnp.asarray(sigma_t, dtype) * t) * cos_e
-         * _safe_div(1, r_e**2 * det, ok))
+         * safe_div(1, r_e**2 * det, ok))
     return jnp.where(ok, E, 0), Y, ok
 
 

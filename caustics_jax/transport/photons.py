@@ -34,7 +34,7 @@ import numpy as np
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
-from ..start_points import _start_points_bvh, _start_points_grid, build_bvh
+from ..start_points import build_bvh, first_crossing
 
 
 class ReceiverGrid(NamedTuple):
@@ -152,9 +152,7 @@ def surface_hits(mesh: SurfaceMesh, L, X, *, bvh=None):
     s_far = (L[..., 2] - z_lo + (z_hi - z_lo) + 1) / jnp.maximum(-d[..., 2], jnp.finfo(d.dtype).tiny)
     end = L + s_far[..., None] * d
     L_b = jnp.broadcast_to(L, end.shape)
-    if mesh.grid is not None:
-        return _start_points_grid(mesh, L_b, end)
-    return _start_points_bvh(mesh, bvh if bvh is not None else build_bvh(mesh), L_b, end)
+    return first_crossing(mesh, L_b, end, bvh=bvh)
 
 
 def refract_into_medium(d, n_s, eta):

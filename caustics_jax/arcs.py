@@ -1,0 +1,234 @@
+"""Arcs of the coplanarity conic inside one triangle: the geometry the walk, the exhaustive
+reference and the curve tracer share (seed 001 §3.4.3-3.4.4, MATH.md §2-3).
+
+Inside a face the conic `A a^2 + B b^2 + C a b + D a + E b + F = 0` (seed 001 eq. 12) is
+cut by the edges (eq. 22-24, corrected) into arcs. An arc is parametrised through the
+pencil of lines through one of its points (`conic.conic_second_intersection`: every line
+through a curve point meets the conic in exactly one other point), by the line's angle
+`phi` measured from the travel direction `tau` towards `perp`; `orientation` picks the
+sense of `perp` so that the curve ahead has `phi` in `(0, pi)` and `phi` increases
+monotonically along it. Then the first edge crossing met when travelling along the curve
+is the edge root of smallest `phi` (`next_crossing`), which also settles the
+four-intersection re-entry case of seed 001 Fig. 5c without a heuristic.
+
+`face_arcs` lists every arc of a face (from each edge root, oriented inward, to the next
+crossing, plus an ellipse lying inside the face), and `FaceArcs.point` maps `u in [0, 1]`
+to a point of an arc; `trace_arcs` samples them for a whole batch of faces (the curve
+figure). The per-step tests of the walk and the exhaustive scan (`root_between`) live
+here too, so both judge a sign change the same way.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .barycentric import barycentric_point
+from .conic import (
+    conic_coefficients,
+    conic_second_intersection,
+    conic_tangent,
+    conic_value,
+    edge_intersection_points,
+    edge_intersections,
+    solve_quadratic,
+)
+
+#: Inward normal of each edge in barycentric space (edge 0: b = 0 -> +b; edge 1:
+#: a + b = 1 -> -(a + b); edge 2: a = 0 -> +a), in the edge numbering of `barycentric.py`.
+INWARD = ((0.0, 1.0), (-1.0, -1.0), (1.0, 0.0))
+#: Arcs per face listed by `face_arcs`: up to 6 edge roots as arc starts, plus one
+#: ellipse inside the face.
+N_ARCS = 7
+
+
+def orientation(coef, e, tau):
+    """Unit travel direction and the `sigma`-signed normal `perp` at curve point `e`, so
+    that the curve ahead (direction `tau`) has pencil angles `phi` in `(0, pi)`."""
+    tau = tau / jnp.maximum(jnp.linalg.norm(tau), jnp.finfo(tau.dtype).tiny)
+    A, B, C = coef[0], coef[1], coef[2]
+    t = conic_tangent(coef, e)
+    grad = jnp.stack([t[1], -t[0]])  # half the gradient (u, v)
+    c2 = A * tau[0] ** 2 + B * tau[1] ** 2 + C * tau[0] * tau[1]
+    bend = -jnp.sign(c2) * grad
+    cross = tau[0] * bend[1] - tau[1] * bend[0]
+    sigma = jnp.where(cross < 0, -1, 1).astype(tau.dtype)
+    perp = sigma * jnp.stack([-tau[1], tau[0]])
+    return tau, perp
+
+
+def edge_roots(coef):
+    """`(t, valid, ab)`: the conic's edge roots (`conic.edge_intersections`, `(3, 2)` each)
+    and their barycentrics `(3, 2, 2)`."""
+    t, valid = edge_intersections(coef)
+    return t, valid, edge_intersection_points(t)
+
+
+def next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
+    """The first edge root met when travelling along the conic from `e` in direction `tau`.
+
+    Returns `(ok, edge, t, ab, phi)`. Excluded as candidates: roots within `64 eps` of `e`
+    (a vertex root reported on two edges), and on the entry edge the root nearest the
+    entry parameter when it is within `8 sqrt(eps)` of it (the entry point itself,
+    recomputed in this triangle's conic).
+    """
+    t, valid, ab = roots
+    eps = float(np.finfo(t.dtype).eps)
+    v = ab - e
+    dist = jnp.linalg.norm(v, axis=-1)
+    cand = valid & (dist > 64 * eps)
+    on_entry = jnp.arange(3)[:, None] == entry_edge
+    gap = jnp.where(on_entry & valid, jnp.abs(t - entry_t), jnp.inf)
+    nearest = gap == jnp.min(gap)
+    cand = cand & ~(nearest & (gap < 8 * np.sqrt(eps)))
+    along, across = v @ tau, v @ perp
+    phi = jnp.arctan2(across, along)
+    phi = jnp.where(phi < 0, phi + jnp.pi, phi)  # the cutting line's angle, in [0, pi)
+    # On the tangent line itself (a straight curve: constant normals, a flat surface) the
+    # line angle is 0 or pi only up to rounding; there, ahead comes first (nearest first)
+    # and behind comes last.
+    on_tangent = jnp.abs(across) <= 1e3 * eps * dist
+    phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
+    phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
+    i = jnp.argmin(phi)
+    return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
+
+
+def project_to_conic(coef, q):
+    """The conic point nearest `q` along the gradient direction at `q` (one exact line cut)."""
+    t = conic_tangent(coef, q)
+    n = jnp.stack([t[1], -t[0]])
+    n = n / jnp.maximum(jnp.linalg.norm(n), jnp.finfo(n.dtype).tiny)
+    A, B, C, D, E, F = coef
+    q2 = A * n[0] ** 2 + B * n[1] ** 2 + C * n[0] * n[1]
+    q1 = (2 * A * q[0] + C * q[1] + D) * n[0] + (2 * B * q[1] + C * q[0] + E) * n[1]
+    h, ok = solve_quadratic(q2, q1, conic_value(coef, q))
+    h = jnp.where(ok, h, jnp.inf)
+    h_min = jnp.where(jnp.abs(h[0]) < jnp.abs(h[1]), h[0], h[1])
+    return q + jnp.where(jnp.isfinite(h_min), h_min, 0) * n
+
+
+def pencil_point(coef, anchor, tau, perp, phi):
+    """The curve point cut by the line through `anchor` at pencil angle `phi`, and whether
+    the cut exists (`conic.conic_second_intersection`)."""
+    d = jnp.cos(phi) * tau + jnp.sin(phi) * perp
+    return conic_second_intersection(coef, anchor, d)
+
+
+def opposite(f1, f2):
+    """Strictly opposite signs."""
+    return jnp.sign(f1) * jnp.sign(f2) < 0
+
+
+def root_between(fg1, fg2):
+    """A sign change of `f` in both orientations (`objectives.bracket_objective`'s `f` and
+    `g`) between two curve points: a root, not an orientation flip."""
+    return opposite(fg1[0], fg2[0]) & opposite(fg1[1], fg2[1])
+
+
+def inside(ab, slack=None):
+    """`ab` in the closed triangle up to `slack` (default `64 eps`)."""
+    slack = 64 * jnp.finfo(ab.dtype).eps if slack is None else slack
+    return (ab[0] >= -slack) & (ab[1] >= -slack) & (ab[0] + ab[1] <= 1 + slack)
+
+
+class FaceArcs(NamedTuple):
+    """The arcs of one face's conic, each parametrised by `u` in `[0, 1]` (`point`).
+
+    Attributes:
+        coef: `(6,)` conic coefficients.
+        straight: the conic is a line (`A = B = C = 0` to rounding: constant normals).
+        starts, ends: `(N_ARCS, 2)` barycentrics where each arc starts and ends.
+        taus, perps: `(N_ARCS, 2)` the pencil frame at each start (`orientation`).
+        phi_ends: `(N_ARCS,)` pencil angle of each arc's end (pi for the ellipse).
+        ok: `(N_ARCS,)` which arcs exist.
+    """
+
+    coef: jax.Array
+    straight: jax.Array
+    starts: jax.Array
+    ends: jax.Array
+    taus: jax.Array
+    perps: jax.Array
+    phi_ends: jax.Array
+    ok: jax.Array
+
+    def point(self, arc, u):
+        """The pencil angle `phi = u phi_end` through the arc's start for a curved conic; the
+        straight segment to the next crossing when the conic is a line (every other line
+        through a point of a line conic meets it only there, so the pencil cannot
+        parametrise it). Returns `(ab, ok)`."""
+        curved, curved_ok = pencil_point(self.coef, self.starts[arc], self.taus[arc],
+                                         self.perps[arc], u * self.phi_ends[arc])
+        line = self.starts[arc] + u * (self.ends[arc] - self.starts[arc])
+        return jnp.where(self.straight, line, curved), self.straight | curved_ok
+
+
+def face_arcs(coef) -> FaceArcs:
+    """Every arc of the conic `coef` inside its face: from each edge root, oriented inward,
+    to the next crossing along the curve, plus an ellipse inside the face (no edge root),
+    anchored where the line `b = 1/3` meets it."""
+    A, B, C, D, E, F = coef
+    scale = jnp.max(jnp.abs(coef))
+    straight = jnp.max(jnp.abs(coef[:3])) <= 64 * jnp.finfo(coef.dtype).eps * scale
+    roots = edge_roots(coef)
+    t_all, valid_all, ab_all = roots
+    starts, ends, taus, perps, phi_ends, ok_arcs = [], [], [], [], [], []
+    for k in range(3):
+        for j in range(2):
+            x = ab_all[k, j]
+            t = conic_tangent(coef, x)
+            side = t @ jnp.asarray(INWARD[k], t.dtype)
+            tau, perp = orientation(coef, x, jnp.where(side < 0, -t, t))
+            ok, _, _, end, phi = next_crossing(roots, x, tau, perp, k, t_all[k, j])
+            starts.append(x)
+            ends.append(end)
+            taus.append(tau)
+            perps.append(perp)
+            phi_ends.append(jnp.where(ok, phi, 0))
+            ok_arcs.append(valid_all[k, j] & ok & (side != 0))
+    s, s_ok = solve_quadratic(A, C / 3 + D, B / 9 + E / 3 + F)
+    anchor = jnp.stack([s[0], jnp.asarray(1 / 3, s.dtype)])
+    tau, perp = orientation(coef, anchor, conic_tangent(coef, anchor))
+    starts.append(anchor)
+    ends.append(anchor)
+    taus.append(tau)
+    perps.append(perp)
+    phi_ends.append(jnp.asarray(jnp.pi, s.dtype) * (1 - 1e-9))
+    ok_arcs.append(~jnp.any(valid_all) & s_ok[0] & ~straight)
+    return FaceArcs(coef, straight, jnp.stack(starts), jnp.stack(ends), jnp.stack(taus),
+                    jnp.stack(perps), jnp.stack(phi_ends), jnp.stack(ok_arcs))
+
+
+def conic_touches_face(coef):
+    """Does the conic pass through the face? Edge crossings, or an ellipse whose centre lies
+    inside the face with the opposite sign of the conic at vertex V0 (seed 001 Fig. 5a)."""
+    _, valid, _ = edge_roots(coef)
+    A, B, C, D, E, F = coef
+    det = 4 * A * B - C * C
+    ellipse = det > 0
+    safe = jnp.where(ellipse, det, 1)
+    a_c = (C * E - 2 * B * D) / safe
+    b_c = (C * D - 2 * A * E) / safe
+    centre_inside = (a_c >= 0) & (b_c >= 0) & (a_c + b_c <= 1)
+    centre = jnp.stack([a_c, b_c])
+    opposite_sign = conic_value(coef, centre) * F < 0  # F = the conic at vertex V0
+    return jnp.any(valid) | (ellipse & centre_inside & opposite_sign)
+
+
+def trace_arcs(V, N, P, L, samples: int):
+    """Sample every arc of the coplanarity conic on faces `(V, N)` `(F, 3, 3)` for one
+    receiver `P` and light `L`: `(ab, xyz, ok)` of shapes `(F, N_ARCS, samples, 2 | 3)`
+    and `(F, N_ARCS, samples)`, `u` uniform in `[0, 1]` along each arc's pencil angle (the
+    same parametrisation the walk refines on and the exhaustive reference scans)."""
+    u = jnp.linspace(0, 1, samples).astype(V.dtype)
+
+    def one(v, n):
+        arcs = face_arcs(conic_coefficients(v, n, P, L))
+        ab, ok = jax.vmap(lambda a: jax.vmap(lambda x: arcs.point(a, x))(u))(jnp.arange(N_ARCS))
+        return ab, barycentric_point(v, ab), ok & arcs.ok[:, None]
+
+    return jax.vmap(one)(V, N)
