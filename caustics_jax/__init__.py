@@ -4,8 +4,9 @@ The public API is what this module re-exports. float64 is never switched on by i
 the package: use `precision("float64")` or `enable_x64()`.
 """
 
-from . import scenes
+from . import kernels, scenes
 from ._precision import enable_x64, precision
+from ._version import __version__
 from .barycentric import barycentric_point, edge_barycentric, interpolated_normal
 from .conic import (
     conic_coefficients,
@@ -31,7 +32,8 @@ from .objectives import (
     signed_sine,
     signed_sine_and_status,
 )
-from .solvers import Solution, Status, solve
+from .prepared import PreparedSurface, prepare
+from .solvers import Exhaustive, ExhaustiveSolution, Newton, Solution, Status, Walk, solve
 from .start_points import start_points
 from .transport import (
     ReceiverGrid,
@@ -47,9 +49,15 @@ from .transport import (
     texel_jacobian,
 )
 
-__version__ = "0.1.0"
-
 __all__ = [
+    "Exhaustive",
+    "ExhaustiveSolution",
+    "Newton",
+    "PreparedSurface",
+    "Walk",
+    "__version__",
+    "kernels",
+    "prepare",
     "ReceiverGrid",
     "SceneFeatures",
     "Solution",
