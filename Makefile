@@ -4,7 +4,11 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test figures lint clean export conformance
+.PHONY: demo test figures lint clean export conformance notebooks docs
+
+# The extras of `make notebooks` and `make docs`, installed into the same .venv on first use.
+NB_STAMP   := $(VENV)/.installed-notebooks
+DOCS_STAMP := $(VENV)/.installed-docs
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -12,8 +16,16 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install -q -c constraints.txt -e ".[dev]"
 	touch $(STAMP)
 
+$(NB_STAMP): $(STAMP)
+	$(PY) -m pip install -q -c constraints.txt -e ".[dev,notebooks]"
+	touch $(NB_STAMP)
+
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install -q -c constraints.txt -e ".[dev,docs]"
+	touch $(DOCS_STAMP)
+
 demo: $(STAMP)
-	$(VENV)/bin/caustics-jax demo
+	$(VENV)/bin/caustics-jax demo --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --hypothesis-profile=ci
@@ -28,7 +40,17 @@ figures: $(STAMP)
 	$(PY) -m experiments.features_benchmark
 	$(PY) -m experiments.stability
 	$(PY) -m experiments.scaling
-	$(VENV)/bin/caustics-jax demo
+	$(VENV)/bin/caustics-jax demo --figure figures/solver_comparison.png --json figures/solver_comparison.json
+
+# Execute every notebook headless (nbclient); fails on any cell error. A full run rewrites the
+# executed copies notebooks/*.ipynb; CAUSTICS_JAX_QUICK=1 (what CI runs) uses small lane and
+# photon counts and writes its copies to build/notebooks/ instead (docs/notebooks.md).
+notebooks: $(NB_STAMP)
+	$(PY) notebooks/execute.py
+
+# The documentation site, offline, strict (broken links and docstring warnings fail): site/.
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # Shader reference data (docs/export.md) and the GLSL ports run against it on a Vulkan
 # device (lavapipe: apt-get install glslang-tools libvulkan1 libvulkan-dev mesa-vulkan-drivers).
@@ -43,4 +65,4 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check caustics_jax experiments tests
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) .pytest_cache .hypothesis site build

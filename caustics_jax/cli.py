@@ -1,9 +1,15 @@
 """`caustics-jax`: the command line (`compare`, `demo`, `export`, `conformance`).
 
-    caustics-jax demo                      # solver comparison on the default wavy pool
+    caustics-jax demo --figure figures/solver_comparison.png   # solver comparison on the default wavy pool
     caustics-jax compare --n 20000 --dtype float32 --configs walk newton-hv --json out.json
+    caustics-jax compare --scene surface.obj --n 4096          # any mesh trimesh reads (OBJ, PLY, GLB, ...)
     caustics-jax export --out refdata --count 1024 --seed 0    # shader reference data
     caustics-jax conformance refdata       # run the GLSL ports on a Vulkan device against it
+    caustics-jax --version
+
+Files are written only where the command line says (`--json`, `--figure`, `--out`),
+relative paths against the current directory; nothing is written by default. Long runs
+show a progress bar on a terminal only (`caustics_jax.progress`).
 """
 
 from __future__ import annotations
@@ -14,8 +20,7 @@ import sys
 from pathlib import Path
 
 from . import compare as cmp
-
-DEFAULT_FIGURE = Path("figures") / "solver_comparison.png"
+from ._version import __version__
 
 
 def _fmt(x, spec=".2e"):
@@ -118,14 +123,19 @@ def _compare(args) -> int:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report, indent=1, default=str))
         print(f"wrote {args.json}")
-    if report["sweep"] and args.figure != "none":
+    if report["sweep"] and args.figure not in (None, "none"):
         plot(report, Path(args.figure))
         print(f"wrote {args.figure}")
+    if not args.json and args.figure in (None, "none"):
+        print("no files written (--json PATH and --figure PATH write the results and the Pareto figure)")
     return 0
 
 
 def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
-    p.add_argument("--scene", default="wavy", choices=sorted(cmp.SCENES))
+    p.add_argument("--scene", default="wavy", metavar="NAME|PATH",
+                   help=f"a named scene ({', '.join(sorted(cmp.SCENES))}) or a mesh file trimesh reads "
+                        f"({', '.join(cmp.MESH_SUFFIXES)}): floor and light placed around it as documented "
+                        "in caustics_jax.compare.scene_from_mesh")
     p.add_argument("--triangles", type=int, default=8192, help="surface tessellation")
     p.add_argument("--n", type=int, default=100_000, help="receiver lanes")
     p.add_argument("--dtype", nargs="+", default=["float32", "float64"],
@@ -139,10 +149,9 @@ def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
     p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement")
     p.add_argument("--eta", type=float, default=1.333)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", default="figures/solver_comparison.json" if demo else None,
-                   help="write the full results as JSON here")
-    p.add_argument("--figure", default=str(DEFAULT_FIGURE),
-                   help="Pareto figure path ('none' to skip)")
+    p.add_argument("--json", default=None, help="write the full results as JSON to this path (default: none)")
+    p.add_argument("--figure", default=None,
+                   help="write the Pareto figure (PNG) to this path (default: none)")
 
 
 def _export(args) -> int:
@@ -177,11 +186,12 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="caustics-jax", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_compare_args(sub.add_parser(
         "compare", help="solver comparison: table, optional JSON and Pareto figure"), demo=False)
     _add_compare_args(sub.add_parser(
-        "demo", help="the main job: compare on the default wavy pool, write the figure"),
+        "demo", help="the main job: compare on the default wavy pool (`make demo` writes figures/solver_comparison.*)"),
         demo=True)
     _add_export_args(sub.add_parser(
         "export", help="reference data for shader tests: <kernel>.json + .bin per kernel, C header"))

@@ -26,12 +26,15 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from . import scenes
 from ._precision import precision
+from .progress import progress
 from .reporting import log, stats
 from .solvers import solve
 from .solvers.walk import default_tol
@@ -56,9 +59,75 @@ SCENES: dict[str, Callable] = {
     "wavy": lambda n, dt: scenes.wavy_pool(n, dtype=dt),
     "wavy_steep": lambda n, dt: scenes.wavy_pool(n, amplitude=0.08, dtype=dt),
     "wavy_jittered": lambda n, dt: scenes.wavy_pool(n, choppiness=0.5, dtype=dt),
+    # Past the focal distance: steep waves over a floor 3 m down, where several paths reach
+    # one receiver (the post-focal transect of experiments/irradiance_agreement.py).
+    "postfocal": lambda n, dt: scenes.wavy_pool(n, amplitude=0.3, depth=3.0, dtype=dt),
     "flat": lambda n, dt: scenes.flat_pool(n, dtype=dt),
     "lagoon": lambda n, dt: scenes.lagoon(n, dtype=dt),
 }
+# `--scene PATH`: a mesh file trimesh reads (`SurfaceMesh.from_trimesh(trimesh.load(path))`).
+MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
+
+
+def is_scene_path(scene: str) -> bool:
+    """True when `scene` names a mesh file (by its suffix, `MESH_SUFFIXES`) rather than a named scene."""
+    return str(scene).lower().endswith(MESH_SUFFIXES)
+
+
+def scene_from_mesh(surface, name: str = "mesh") -> scenes.Scene:
+    """A comparison scene around any surface: the receivers and light a mesh file gets.
+
+    With `W` the larger side of the surface's xy bounding box, the floor is the plane
+    `z = z_min - W / 4` under the whole xy extent (receivers on a 32 x 32 grid there,
+    normals +z; `compare` lays its own `n` lanes on the same plane and extent) and a point
+    light stands at `centre + (0.1 W, -0.075 W)` in xy, `0.75 W` above the highest vertex:
+    the proportions of the built-in pools (4 m wide, floor 1 m down, light at
+    (0.4, -0.3, 3) m). The surface's normals must face the light (+z); refraction is from
+    above into the medium below, as in every scene.
+    """
+    V = np.asarray(surface.vertices, np.float64)
+    lo, hi = V.min(0), V.max(0)
+    W = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    if not W > 0:
+        raise ValueError(f"scene {name!r}: the surface has no xy extent (bounding box {lo} .. {hi})")
+    centre = 0.5 * (lo[:2] + hi[:2])
+    u = (np.arange(32) + 0.5) / 32
+    X, Y = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]), indexing="xy")
+    R = np.stack([X.ravel(), Y.ravel(), np.full(X.size, lo[2] - W / 4)], -1)
+    light = np.array([centre[0] + 0.1 * W, centre[1] - 0.075 * W, hi[2] + 0.75 * W])
+    dtype = surface.dtype
+    lights = scenes.Lights(position=jnp.asarray(light[None], dtype),
+                           direction=jnp.asarray((light / np.linalg.norm(light))[None], dtype),
+                           directional=(False,))
+    return scenes.Scene(surface=surface, receivers=jnp.asarray(R, dtype),
+                        receiver_normals=jnp.asarray(np.broadcast_to([0.0, 0.0, 1.0], R.shape), dtype),
+                        lights=lights, is_grid=False, name=name)
+
+
+def load_scene(scene: str, n_triangles: int = 8192, dtype="float64") -> scenes.Scene:
+    """A named scene of `SCENES` at `n_triangles`, or a mesh file (OBJ, PLY, GLB, ...) read by
+    trimesh with the floor and light of `scene_from_mesh` (`n_triangles` unused then)."""
+    if not is_scene_path(scene):
+        if scene not in SCENES:
+            raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
+                             f"({', '.join(MESH_SUFFIXES)}), got {scene!r}")
+        return SCENES[scene](n_triangles, dtype)
+    import trimesh
+
+    from .mesh import SurfaceMesh
+
+    path = Path(scene).expanduser()
+    if not path.is_file():
+        raise ValueError(f"scene file {str(path)!r} does not exist")
+    try:
+        loaded = trimesh.load(path)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise ValueError(f"scene file {str(path)!r} could not be read by trimesh: {exc}") from None
+    try:
+        surface = SurfaceMesh.from_trimesh(loaded, dtype=dtype)
+    except ValueError as exc:
+        raise ValueError(f"scene file {str(path)!r} holds no usable triangle mesh: {exc}") from None
+    return scene_from_mesh(surface, name=f"{path.name} ({surface.faces.shape[0]} triangles)")
 # Acceptance tolerances of the Pareto sweep (|f| = sine of the angle error), per dtype;
 # float32 stops at 1e-6, the noise floor of f in float32 (docs/kernels.md, float32 audit).
 SWEEP_TOLS = {"float32": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
@@ -80,10 +149,14 @@ class CompareConfig:
     repeats: int = 2
     eta: float = 1.333
     seed: int = 0
+    keep_lanes: bool = False  # per-lane statuses and receivers in the report (floor maps of failures)
 
     def validate(self) -> None:
-        if self.scene not in SCENES:
-            raise ValueError(f"scene must be one of {sorted(SCENES)}, got {self.scene!r}")
+        if not is_scene_path(self.scene) and self.scene not in SCENES:
+            raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
+                             f"({', '.join(MESH_SUFFIXES)}), got {self.scene!r}")
+        if is_scene_path(self.scene) and not Path(self.scene).expanduser().is_file():
+            raise ValueError(f"scene file {self.scene!r} does not exist")
         unknown = [c for c in self.configs if c not in CONFIGS]
         if unknown:
             raise ValueError(f"unknown solver configs {unknown}; known: {sorted(CONFIGS)}")
@@ -99,7 +172,7 @@ class CompareConfig:
 def _scene_arrays(cfg: CompareConfig):
     """The float64 scene, `n` receivers (floor grid) and their light endpoints, as numpy."""
     side = int(np.ceil(np.sqrt(cfg.n)))
-    sc = SCENES[cfg.scene](cfg.n_triangles, "float64")
+    sc = load_scene(cfg.scene, cfg.n_triangles, "float64")
     lo = np.asarray(sc.surface.vertices)[:, :2].min(0)
     hi = np.asarray(sc.surface.vertices)[:, :2].max(0)
     depth = float(np.asarray(sc.receivers)[0, 2])
@@ -167,7 +240,7 @@ def reference(cfg: CompareConfig, sc, P, L):
             "nearest_M0": np.argmin(d, 1), "seconds": time.perf_counter() - t}
 
 
-def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps):
+def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps, bar):
     with precision(dtype):
         mesh = sc64.surface.astype(dtype)
         Pd, Ld = np.asarray(P, dtype), np.asarray(L, dtype)
@@ -181,6 +254,7 @@ def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps):
                     cfg.repeats)
             except ValueError as exc:  # e.g. a solver unavailable in this dtype
                 log(f"  skipped: {exc}")
+                bar.update(1)
                 continue
             err = _errors(sol, ref_mesh, P, L, cfg.eta, ref)
             it = np.asarray(sol.iterations)[np.asarray(sol.found)]
@@ -196,12 +270,15 @@ def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps):
                 "compile_s": compile_s, "seconds": steady, "solves_per_s": cfg.n / steady,
                 "status": sol.summary(), "tol": opts.get("tol", default_tol(dtype)),
             }
+            if cfg.keep_lanes:
+                row["lane_status"] = np.asarray(sol.status).astype(int).tolist()
             results.append(row)
             log(f"  {row['solves_per_s']:.0f} solves/s, found {row['found']:.4f}, "
                 f"compile {compile_s:.1f} s ({time.perf_counter() - t0:.0f} s)")
             if cfg.sweep:
                 sweeps.extend(_sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh,
                                      P, L))
+            bar.update(1)
 
 
 def _sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh, P, L):
@@ -228,9 +305,10 @@ def run(cfg: CompareConfig) -> dict:
         n_cross = int(np.asarray(start_points(sc64.surface, P, L)[2]).sum())
         ref = reference(cfg, sc64, P, L)
     results, sweeps = [], []
-    for dtype in cfg.dtypes:
-        _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps)
-    return {
+    with progress(total=len(cfg.dtypes) * len(cfg.configs), desc="compare", unit="config") as bar:
+        for dtype in cfg.dtypes:
+            _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps, bar)
+    report = {
         "scene": sc64.name, "n": cfg.n, "lanes_crossing_surface": n_cross,
         "config": {k: v for k, v in dataclasses.asdict(cfg).items()},
         "reference": None if ref is None else {
@@ -239,6 +317,9 @@ def run(cfg: CompareConfig) -> dict:
         "rows": results, "sweep": sweeps,
         "platform": jax.default_backend(), "devices": [str(d) for d in jax.devices()],
     }
+    if cfg.keep_lanes:
+        report["receivers"] = P.tolist()
+    return report
 
 
 def _rank(row: dict):

@@ -27,6 +27,7 @@ import numpy as np
 
 import caustics_jax as cj
 from caustics_jax.compare import CONFIGS
+from caustics_jax.progress import progress
 from experiments.common import ROOT, log, parse_args, use_agg, write_json
 
 use_agg()
@@ -59,8 +60,10 @@ def _median_time(fn, repeats):
 
 def run(sizes=SIZES, dtypes=DTYPES, repeats=REPEATS) -> dict:
     rows = []
+    steps = progress(total=len(sizes) * len(dtypes), desc="scaling", unit="mesh")
     for n_tri in sizes:
         for dtype in dtypes:
+            steps.update(1)  # a bar over (tessellation, dtype) pairs, on a terminal only
             with cj.precision(dtype):
                 t = time.perf_counter()
                 sc = cj.scenes.wavy_pool(n_tri, n_receivers=N_RECEIVERS, dtype=dtype)
@@ -88,6 +91,7 @@ def run(sizes=SIZES, dtypes=DTYPES, repeats=REPEATS) -> dict:
                     rows.append(row)
                     log(f"{F:>9,} {dtype} {name:24s} {row['us_per_solve']:8.2f} us/solve  found {row['found']:.4f}  "
                         f"crossed {row['crossed_mean_found']:.1f}  ({row['wall_incl_compile_s']:.0f} s)")
+    steps.close()
     return {"rows": rows, "fits": fits(rows), "lanes": N_RECEIVERS**2, "repeats": repeats,
             "platform": jax.default_backend(), "devices": [str(d) for d in jax.devices()]}
 

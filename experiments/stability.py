@@ -37,6 +37,7 @@ import caustics_jax as cj
 from caustics_jax import stress
 from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES
 from caustics_jax.conic import conic_value
+from caustics_jax.progress import progress
 from caustics_jax.solvers import Status
 from caustics_jax.solvers.walk import default_tol
 from caustics_jax.testing import oracle
@@ -217,7 +218,7 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
 def run(n: int = 256, n_exhaustive: int = 64, categories=stress.CATEGORIES, seed: int = 0) -> dict:
     cj.enable_x64()  # float64 available; every float32 array is built explicitly
     result = {"n": n, "n_exhaustive": n_exhaustive, "seed": seed, "categories": {}}
-    for c in categories:
+    for c in progress(categories, desc="stress suite", unit="category"):
         t0 = time.perf_counter()
         case = stress.stress_case(c, n, seed)
         kern = run_kernels(case)

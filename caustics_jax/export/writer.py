@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._precision import precision
+from ..progress import progress
 from .cases import split
 from .records import CASES, FORMAT_VERSION, c_header, layout, pack_records, record_fields
 from .registry import KERNELS, Kernel
@@ -128,7 +129,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     _check_out_dir(out)
     audit = load_audit()
     written = []
-    for name in names:
+    for name in progress(names, desc="export", unit="kernel"):
         manifest, raw = export_kernel(KERNELS[name], int(count), int(seed), audit)
         (out / f"{name}.json").write_text(json.dumps(manifest, indent=1) + "\n")
         (out / f"{name}.bin").write_bytes(raw)

@@ -34,6 +34,7 @@ import numpy as np
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
+from ..progress import progress as progress_bar
 from ..start_points import build_bvh, first_crossing
 
 
@@ -204,7 +205,8 @@ def photon_irradiance(mesh: SurfaceMesh, L, *, intensity: float, eta: float = 1.
         seed: `jax.random` seed; chunk `i` uses `fold_in(key, i)`.
         sigma_t: Beer-Lambert extinction in the medium (1/m).
         chunk: photons traced per jitted call.
-        progress: optional callable `progress(done, total)`.
+        progress: optional callable `progress(done, total)`, called after each chunk; a
+            progress bar is drawn on a terminal in any case (`caustics_jax.progress`).
 
     Traced in the mesh's dtype; binned in float64.
     """
@@ -233,19 +235,21 @@ def photon_irradiance(mesh: SurfaceMesh, L, *, intensity: float, eta: float = 1.
     args = (jnp.asarray(L_np, dtype), jnp.asarray(tuple(plane), dtype), jnp.asarray(receiver.z, dtype),
             jnp.asarray(eta, dtype), jnp.asarray(sigma_t, dtype), jnp.asarray(intensity, dtype),
             jnp.asarray(total, dtype))
-    for i in range(n_chunks):
-        Y, w, valid = (np.asarray(x) for x in _trace_chunk(
-            mesh, bvh, jax.random.fold_in(key, i), *args, chunk=chunk))
-        ix = np.floor((Y[:, 0] - receiver.x0) / receiver.dx)
-        iy = np.floor((Y[:, 1] - receiver.y0) / receiver.dy)
-        inside = valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
-        cell = (iy[inside] * receiver.nx + ix[inside]).astype(np.int64)
-        w = w[inside].astype(np.float64)
-        E += np.bincount(cell, w, E.size)
-        E2 += np.bincount(cell, w * w, E.size)
-        hits += np.bincount(cell, minlength=E.size)
-        if progress is not None:
-            progress((i + 1) * chunk, total)
+    with progress_bar(total=total, desc="photons", unit="photon", unit_scale=True) as bar:
+        for i in range(n_chunks):
+            Y, w, valid = (np.asarray(x) for x in _trace_chunk(
+                mesh, bvh, jax.random.fold_in(key, i), *args, chunk=chunk))
+            ix = np.floor((Y[:, 0] - receiver.x0) / receiver.dx)
+            iy = np.floor((Y[:, 1] - receiver.y0) / receiver.dy)
+            inside = valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
+            cell = (iy[inside] * receiver.nx + ix[inside]).astype(np.int64)
+            w = w[inside].astype(np.float64)
+            E += np.bincount(cell, w, E.size)
+            E2 += np.bincount(cell, w * w, E.size)
+            hits += np.bincount(cell, minlength=E.size)
+            bar.update(chunk)
+            if progress is not None:
+                progress((i + 1) * chunk, total)
     shape = (receiver.ny, receiver.nx)
     area = receiver.cell_area
     return PhotonMap(irradiance=(E / area).reshape(shape), stderr=(np.sqrt(E2) / area).reshape(shape),
