@@ -17,7 +17,7 @@ from caustics_jax.conic import (
     edge_quadratics,
     solve_quadratic,
 )
-from caustics_jax.testing import random_triangles
+from caustics_jax.testing import oracle, random_triangles
 
 DTYPES = [jnp.float32, jnp.float64]
 # Relative triple-product residual |n~ . (PL x PM)| / (|n~| |PL| |PM|) at points that are
@@ -36,7 +36,7 @@ def _config(seed, n, dtype=np.float64):
     V, N = random_triangles(rng, n, normal_spread=0.5)
     w = rng.dirichlet([1.0, 1.0, 1.0], n)
     ab_x = w[:, 1:] * rng.uniform(-0.5, 1.5, (n, 1))  # inside and outside the triangle
-    X = V[:, 0] + ab_x[:, :1] * (V[:, 1] - V[:, 0]) + ab_x[:, 1:] * (V[:, 2] - V[:, 0])
+    X = oracle.barycentric_point(V, ab_x)
     u = rng.normal(size=(n, 3)) * [0.4, 0.4, 0.0] + [0.0, 0.0, 1.0]
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     P = X - rng.uniform(0.2, 3.0, (n, 1)) * u
@@ -45,25 +45,16 @@ def _config(seed, n, dtype=np.float64):
 
 
 def triple_product_residual(V, N, P, L, ab):
-    """Float64 numpy |n~ . (PL x PM)| / (|n~| |PL| |PM|), independent of the code under test."""
-    V, N, P, L, ab = (np.asarray(x, np.float64) for x in (V, N, P, L, ab))
-    a, b = ab[..., :1], ab[..., 1:]
-    M = V[..., 0, :] + a * (V[..., 1, :] - V[..., 0, :]) + b * (V[..., 2, :] - V[..., 0, :])
-    n = N[..., 0, :] + a * (N[..., 1, :] - N[..., 0, :]) + b * (N[..., 2, :] - N[..., 0, :])
-    PL, PM = L - P, M - P
-    num = np.abs(np.sum(n * np.cross(PL, PM), -1))
-    den = np.linalg.norm(n, axis=-1) * np.linalg.norm(PL, axis=-1) * np.linalg.norm(PM, axis=-1)
-    return num / den
+    """Float64 |n~ . (PL x PM)| / (|n~| |PL| |PM|) by the oracle, independent of the code under test."""
+    return oracle.triple_product(*(np.asarray(x, np.float64) for x in (V, N, P, L, ab)), relative=True)
 
 
 def conic_residual(coef, V, N, P, L, ab):
     """|conic(ab)| normalised like `triple_product_residual` (the conic *is* that product)."""
     ab64 = np.asarray(ab, np.float64)
     val = np.abs(np.asarray(conic_value(jnp.asarray(coef), jnp.asarray(ab, coef.dtype)), np.float64))
-    a, b = ab64[..., :1], ab64[..., 1:]
     V, N, P, L = (np.asarray(x, np.float64) for x in (V, N, P, L))
-    M = V[..., 0, :] + a * (V[..., 1, :] - V[..., 0, :]) + b * (V[..., 2, :] - V[..., 0, :])
-    n = N[..., 0, :] + a * (N[..., 1, :] - N[..., 0, :]) + b * (N[..., 2, :] - N[..., 0, :])
+    M, n = oracle.barycentric_point(V, ab64), oracle.interpolated_normal(N, ab64)
     den = np.linalg.norm(n, axis=-1) * np.linalg.norm(L - P, axis=-1) * np.linalg.norm(M - P, axis=-1)
     return val / den
 
@@ -83,10 +74,7 @@ def test_conic_is_the_triple_product_everywhere():
     V, N, P, L, _ = _config(11, 256)
     ab = np.random.default_rng(1).uniform(-1, 2, (256, 2))
     coef = coef_j(*(jnp.asarray(x) for x in (V, N, P, L)))
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
-    expected = np.sum(n * np.cross(L - P, M - P), -1)
+    expected = oracle.triple_product(V, N, P, L, ab)
     np.testing.assert_allclose(np.asarray(conic_value(coef, jnp.asarray(ab))), expected,
                                rtol=1e-11, atol=1e-12)
     K = np.asarray(conic_matrix(*(jnp.asarray(x) for x in (V, N, P, L))))
@@ -98,10 +86,11 @@ def test_conic_is_the_triple_product_everywhere():
 def test_points_solved_onto_conic_satisfy_triple_product(dtype, seed):
     V, N, P, L, _ = _config(seed, 512)
     coef = coef_j(*(jnp.asarray(x, dtype) for x in (V, N, P, L)))
-    A, B, C, D, E, F = np.moveaxis(np.asarray(coef), -1, 0)
     a = np.random.default_rng(seed).uniform(0, 1, 512).astype(dtype)
-    # For fixed a the conic is a quadratic in b: B b^2 + (C a + E) b + (A a^2 + D a + F).
-    b, valid = solve_quadratic(jnp.asarray(B), jnp.asarray(C * a + E), jnp.asarray(A * a * a + D * a + F))
+    # For fixed a the conic is a quadratic in b: B b^2 + (C a + E) b + (A a^2 + D a + F),
+    # evaluated in `dtype` (the oracle's conic on the line (a, 0) + t (0, 1)).
+    q = oracle.conic_on_line(np.asarray(coef), np.stack([a, np.zeros_like(a)], -1), np.array([0, 1], dtype))
+    b, valid = solve_quadratic(*(jnp.asarray(x) for x in q))
     b, valid = np.asarray(b), np.asarray(valid)
     for k in range(2):
         ok = valid[:, k] & (np.abs(b[:, k]) < 10)
@@ -155,10 +144,9 @@ def test_paper_tangent_with_K_transpose_is_wrong_away_from_M0():
     args = [jnp.asarray(x) for x in (V, N, P, L)]
     K = np.asarray(conic_matrix(*args))
     coef = coef_j(*args)
-    A, B, C, D, E, F = np.moveaxis(np.asarray(coef), -1, 0)
     a = np.random.default_rng(13).uniform(0, 1, 512)
-    b, valid = (np.asarray(x) for x in solve_quadratic(
-        jnp.asarray(B), jnp.asarray(C * a + E), jnp.asarray(A * a * a + D * a + F)))
+    q = oracle.conic_on_line(np.asarray(coef), np.stack([a, np.zeros_like(a)], -1), np.array([0.0, 1.0]))
+    b, valid = (np.asarray(x) for x in solve_quadratic(*(jnp.asarray(x) for x in q)))
     ok = valid[:, 0] & (np.abs(b[:, 0]) < 10)
     ab = np.stack([a, b[:, 0]], -1)[ok]
     grad = np.asarray(jax.vmap(jax.grad(conic_value, argnums=1))(coef[ok], jnp.asarray(ab)))

@@ -64,6 +64,21 @@ def inside_triangle(ab, tol=0.0):
     return (a >= -tol) & (b >= -tol) & (a + b <= 1 + tol)
 
 
+def triple_product(V, N, P, L, ab, relative: bool = False):
+    """The coplanarity constraint `n~ . (PL x PM)` at `ab` (seed 001 eq. 9; MATH.md §2),
+    with `M` from eq. 3 and the unnormalised `n~` of eq. 6-8: zero on the conic.
+
+    With `relative`, `|n~ . (PL x PM)| / (|n~| |PL| |PM|)`: the sine-like residual of a
+    curve point, comparable across scenes and dtypes.
+    """
+    M, n = barycentric_point(V, ab), interpolated_normal(N, ab)
+    PL, PM = L - P, M - P
+    c = np.sum(n * np.cross(PL, PM), -1)
+    if not relative:
+        return c
+    return np.abs(c) / (np.linalg.norm(n, axis=-1) * np.linalg.norm(PL, axis=-1) * np.linalg.norm(PM, axis=-1))
+
+
 def conic_on_line(coef, ab0, d):
     """The conic `A a^2 + B b^2 + C a b + D a + E b + F` (seed 001 eq. 12) on the line
     `(a, b) = ab0 + t d`: coefficients `(q2, q1, q0)` of `q2 t^2 + q1 t + q0`.

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from caustics_jax.testing import planted_paths, random_triangles
+from caustics_jax.testing import oracle, planted_paths, random_triangles
 from caustics_jax.transport import autodiff_D, ray_differential_D
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -20,10 +20,6 @@ def _cast(arrays, dtype):
 
 def _fields(p):
     return p.V, p.N, p.P, p.L, p.ab
-
-
-def _unit(x):
-    return x / np.linalg.norm(x, axis=-1, keepdims=True)
 
 
 def _dot(u, v):
@@ -41,17 +37,15 @@ def _D_reference(V, N, P, L, ab, eta, *, m_sign=-1, eta_sign=-1, wn_sign=1, mu_d
     frame (w_perp, w_par) is built differently from the package's, on purpose: D must not
     depend on it.
     """
-    a, b = ab[:, :1], ab[:, 1:]
     E1, E2 = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
-    M = V[:, 0] + a * E1 + b * E2
-    n_tilde = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
-    n_s, n_len = _unit(n_tilde), np.linalg.norm(n_tilde, axis=-1, keepdims=True)
-    w_P, w_L = _unit(P - M), _unit(L - M)
+    M, n_tilde = oracle.barycentric_point(V, ab), oracle.interpolated_normal(N, ab)
+    n_s, n_len = oracle.unit(n_tilde), np.linalg.norm(n_tilde, axis=-1, keepdims=True)
+    w_P, w_L = oracle.unit(P - M), oracle.unit(L - M)
     d_P = np.linalg.norm(P - M, axis=-1, keepdims=True)
     d_L = np.linalg.norm(L - M, axis=-1, keepdims=True)
-    n_g = _unit(np.cross(E1, E2))
+    n_g = oracle.unit(np.cross(E1, E2))
     helper = np.where(np.abs(w_P[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    w_perp = _unit(np.cross(w_P, helper))
+    w_perp = oracle.unit(np.cross(w_P, helper))
     w_par = np.cross(w_P, w_perp)
     G = np.stack([E1, E2], -1)
     Gt = np.swapaxes(G, -1, -2)
@@ -160,7 +154,7 @@ def test_float32_D_error_is_rounding_times_conditioning(dtype, seed, spread, eta
 
 
 def _geometric_normals(V):
-    n = _unit(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]))
+    n = oracle.unit(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]))
     return np.repeat(n[:, None], 3, axis=1)
 
 
@@ -201,7 +195,7 @@ def test_D_at_normal_incidence_on_a_flat_surface_is_d_P_plus_eta_d_L_squared(dty
     N = _geometric_normals(V)
     n = N[:, 0]
     ab = rng.dirichlet([2.0, 2.0, 2.0], BATCH)[:, 1:]
-    M = V[:, 0] + ab[:, :1] * (V[:, 1] - V[:, 0]) + ab[:, 1:] * (V[:, 2] - V[:, 0])
+    M = oracle.barycentric_point(V, ab)
     d_P, d_L = rng.uniform(0.2, 2.0, BATCH), rng.uniform(0.5, 5.0, BATCH)
     args = _cast((V, N, M - d_P[:, None] * n, M + d_L[:, None] * n, ab), dtype)
     exact = (d_P + eta * d_L) ** 2
@@ -216,21 +210,19 @@ def test_D_at_normal_incidence_on_a_flat_surface_is_d_P_plus_eta_d_L_squared(dty
 def _degenerate_cases(n=64):
     """Five batches of `n` inputs, each degenerate in one way only."""
     p = planted_paths(31, n)
-    a, b = p.ab[:, :1], p.ab[:, 1:]
-    bary = lambda V, a, b: V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])  # noqa: E731
     # w_P in the (flat, z = 0) triangle's plane, while the tilted shading normal still
     # refracts it (w_P.n_s = -0.71, not TIR): only eq. 28's w_P.n_g vanishes
     V = p.V.copy()
     V[..., 2] = 0
-    N = np.broadcast_to(_unit(np.array([-1.0, 0.0, 1.0])), V.shape).copy()
-    M = bary(V, a, b)
+    N = np.broadcast_to(oracle.unit(np.array([-1.0, 0.0, 1.0])), V.shape).copy()
+    M = oracle.barycentric_point(V, p.ab)
     grazing = (V, N, M + [1.0, 0, 0], M + [0, 0, 1.0], p.ab)
     # P far sideways: -w_P beyond the critical angle at M
     tir = (p.V, p.N, p.M + np.array([8.0, 0.0, -0.5]), p.L, p.ab)
     # collinear vertices
     V = p.V.copy()
     V[:, 2] = V[:, 0] + 2 * (V[:, 1] - V[:, 0])
-    M = bary(V, a, b)
+    M = oracle.barycentric_point(V, p.ab)
     sliver = (V, p.N, M + [0.1, 0.2, -1.0], M + [0.1, 0, 1.0], p.ab)
     # P exactly at M = V0
     at_P = (p.V, p.N, p.V[:, 0], p.L, np.zeros_like(p.ab))
@@ -238,7 +230,7 @@ def _degenerate_cases(n=64):
     N = p.N.copy()
     N[:, 1] = -N[:, 0]
     ab = np.tile([0.5, 0.0], (n, 1))
-    M = bary(p.V, ab[:, :1], ab[:, 1:])
+    M = oracle.barycentric_point(p.V, ab)
     zero_normal = (p.V, N, M - [0, 0, 1.0], M + [0, 0, 1.0], ab)
     cases = [grazing, tir, sliver, at_P, zero_normal]
     return [np.concatenate([c[i] for c in cases]) for i in range(5)], len(cases)
