@@ -1,0 +1,124 @@
+"""The package's structure (DESIGN.md "Layers", STYLE.md "Structure"; issue 13): an acyclic
+import graph, no private name taken from another module, every third-party import declared,
+`cj.kernels` reachable after `import caustics_jax`, one version source.
+
+Read from the source with `tools/import_graph.py` (AST, imports inside functions included),
+so no JAX work runs here.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.metadata
+import importlib.util
+import pathlib
+import re
+import subprocess
+import sys
+import tomllib
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "caustics_jax"
+
+
+def _load_tool():
+    spec = importlib.util.spec_from_file_location("import_graph", ROOT / "tools" / "import_graph.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses resolve their annotations through sys.modules
+    spec.loader.exec_module(module)
+    return module
+
+
+import_graph = _load_tool()
+MODULES = import_graph.build(PACKAGE)
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+
+
+def test_the_package_import_graph_is_acyclic():
+    assert len(MODULES) > 40  # the whole package was read
+    assert import_graph.find_cycles(MODULES) == []
+
+
+def test_no_module_imports_a_private_name_of_another_module():
+    offenders = [f"{m.path.relative_to(ROOT)}:{line}: {name} of {target}"
+                 for m in MODULES.values() for line, target, name in m.private]
+    assert offenders == []
+
+
+def test_the_checker_finds_a_cycle_and_private_imports_in_a_planted_package(tmp_path):
+    """The two rules above can fail: a package with `a -> b -> a` (the second import inside a
+    function), `from .a import _helper`, and `a._helper` through a module alias."""
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("from .a import f\n")
+    (pkg / "a.py").write_text("from . import b\n\ndef f():\n    return b.g()\n\ndef _helper():\n    pass\n")
+    (pkg / "b.py").write_text("def g():\n    from .a import _helper\n    return _helper\n")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "c.py").write_text("from .. import a\nfrom .._private_module import public\n\n"
+                                      "x = a._helper\n")
+    (pkg / "_private_module.py").write_text("public = 1\n")
+    modules = import_graph.build(pkg)
+    assert import_graph.find_cycles(modules) == [["pkg.a", "pkg.b"]]
+    private = sorted((m.name, target, name) for m in modules.values() for _, target, name in m.private)
+    assert private == [("pkg.b", "pkg.a", "_helper"), ("pkg.sub.c", "pkg.a", "_helper")]
+    assert set(modules["pkg.sub.c"].imports) == {"pkg.a", "pkg._private_module"}
+    assert import_graph.main(["--root", str(pkg)]) == 1
+
+
+def _distribution(requirement: str) -> str:
+    """PEP 503 normalised distribution name of a requirement string."""
+    name = re.match(r"\s*([A-Za-z0-9][A-Za-z0-9._-]*)", requirement).group(1)
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def test_every_third_party_import_is_a_declared_dependency():
+    """Imports run on `import caustics_jax` need a `[project] dependencies` entry; an import
+    inside a function (lazy) may instead come from an optional extra. Import names map to
+    distributions through the installed metadata (`jaxlib` is its own distribution, ...)."""
+    required = {_distribution(r) for r in PYPROJECT["project"]["dependencies"]}
+    optional = {_distribution(r) for extra in PYPROJECT["project"].get("optional-dependencies", {}).values()
+                for r in extra}
+    providers = importlib.metadata.packages_distributions()
+    problems = []
+    for mod in MODULES.values():
+        for line, name, at_import in mod.external:
+            if name in sys.stdlib_module_names:
+                continue
+            dists = {_distribution(d) for d in providers.get(name, [])}
+            where = f"{mod.path.relative_to(ROOT)}:{line}: {name}"
+            if not dists:
+                problems.append(f"{where}: no installed distribution provides it")
+            elif not dists & required and (at_import or not dists & optional):
+                problems.append(f"{where} ({', '.join(sorted(dists))}) is not declared"
+                                + ("" if at_import else " in the dependencies or an extra"))
+    assert problems == []
+    seen = {name for m in MODULES.values() for _, name, _ in m.external} - set(sys.stdlib_module_names)
+    assert {"jax", "numpy", "equinox", "optimistix", "jaxtyping", "scipy", "trimesh"} <= seen
+
+
+def test_kernels_is_reachable_after_importing_the_package():
+    """In a fresh interpreter: nothing else has imported `caustics_jax.kernels` there."""
+    code = ("import types, caustics_jax as cj; assert isinstance(cj.kernels, types.ModuleType); "
+            "print(cj.kernels.__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "caustics_jax.kernels"
+
+
+def test_the_version_is_written_once():
+    """pyproject.toml reads it from `caustics_jax/_version.py`; the installed metadata agrees;
+    no other module assigns a literal `__version__`."""
+    import caustics_jax
+
+    project = PYPROJECT["project"]
+    assert "version" not in project and "version" in project["dynamic"]
+    assert PYPROJECT["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "caustics_jax._version.__version__"}
+    assert caustics_jax.__version__ == importlib.metadata.version("caustics_jax")
+    writers = []
+    for mod in MODULES.values():
+        for node in ast.walk(ast.parse(mod.path.read_text())):
+            if (isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant)
+                    and any(isinstance(t, ast.Name) and t.id == "__version__" for t in node.targets)):
+                writers.append(mod.name)
+    assert writers == ["caustics_jax._version"]
+
