@@ -26,22 +26,12 @@ import numpy as np  # noqa: E402
 
 import caustics_jax as cj  # noqa: E402
 from caustics_jax.conic import edge_intersection_points  # noqa: E402
-from caustics_jax.testing import planted_paths  # noqa: E402
+from caustics_jax.testing import oracle, planted_paths  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 #: Package data read by `caustics_jax.export.load_audit` (an installed wheel carries it).
 PACKAGE_AUDIT = ROOT / "caustics_jax" / "export" / "float32_audit.json"
 N_PATHS = 200_000
-
-
-def triple_residual(V, N, P, L, ab):
-    """|n~ . (PL x PM)| / (|n~| |PL| |PM|) in float64: the conic's own relative residual."""
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
-    c = np.sum(n * np.cross(L - P, M - P), -1)
-    return np.abs(c) / (np.linalg.norm(n, axis=-1) * np.linalg.norm(L - P, axis=-1)
-                        * np.linalg.norm(M - P, axis=-1))
 
 
 def run(n_paths: int = N_PATHS) -> dict:
@@ -75,15 +65,16 @@ def run(n_paths: int = N_PATHS) -> dict:
         t32, v32 = (np.asarray(x) for x in jax.jit(cj.edge_intersections)(jnp.asarray(c32, jnp.float32)))
         ab = np.asarray(edge_intersection_points(jnp.asarray(t32, jnp.float64)))
         lanes = np.nonzero(v32)
-        errors["edge roots: triple-product residual (rel)"] = triple_residual(
-            V[lanes[0]], N[lanes[0]], P[lanes[0]], L[lanes[0]], ab[lanes])
+        # |n~ . (PL x PM)| / (|n~| |PL| |PM|) in float64 (seed 001 eq. 9): the conic's own
+        # relative residual, by the oracle
+        errors["edge roots: triple-product residual (rel)"] = oracle.triple_product(
+            V[lanes[0]], N[lanes[0]], P[lanes[0]], L[lanes[0]], ab[lanes], relative=True)
 
         # M0 = line PL' meets the plane: put L' on the line P' -> M through the planted M.
         P_line = p.M - 0.5 * (p.L - p.M)
         c_line = np.asarray(coef_fn(*[jnp.asarray(x, jnp.float32) for x in (p.V, p.N, P_line, p.L)]))
         val = np.asarray(cj.conic_value(jnp.asarray(c_line, jnp.float64), jnp.asarray(p.ab)))
-        a, b = p.ab[:, :1], p.ab[:, 1:]
-        n = p.N[:, 0] + a * (p.N[:, 1] - p.N[:, 0]) + b * (p.N[:, 2] - p.N[:, 0])
+        n = oracle.interpolated_normal(p.N, p.ab)
         errors["conic value at M0 (rel, as triple product)"] = np.abs(val) / (
             np.linalg.norm(n, axis=-1) * np.linalg.norm(p.L - P_line, axis=-1)
             * np.linalg.norm(p.M - P_line, axis=-1))
