@@ -52,17 +52,18 @@ notebooks: $(NB_STAMP)
 docs: $(DOCS_STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
-# Shader reference data (docs/export.md) and the GLSL ports run against it on a Vulkan
+# Shader reference data (docs/export.md): every kernel and every scene, and the GLSL ports
+# (kernels; start point, walk, D, irradiance on the scenes) run against it on a Vulkan
 # device (lavapipe: apt-get install glslang-tools libvulkan1 libvulkan-dev mesa-vulkan-drivers).
 REFDATA := out/refdata
 export: $(STAMP)
-	$(VENV)/bin/caustics-jax export --out $(REFDATA) --count 1024 --seed 0
+	$(VENV)/bin/caustics-jax export --out $(REFDATA) --count 1024 --lanes 4096 --seed 0
 
 conformance: export
 	$(VENV)/bin/caustics-jax conformance $(REFDATA) --json $(REFDATA)/conformance.json
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check caustics_jax experiments tests
+	$(VENV)/bin/ruff check caustics_jax experiments tests notebooks/*.py docs/_hooks.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis site build
