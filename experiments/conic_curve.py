@@ -6,14 +6,17 @@
 # (`caustics_jax.solve`) really travel along it from the start point `M0 = PL ∩ surface`
 # to the refraction point `M`?
 #
-# The curve is traced exactly, triangle by triangle, in float64: each face's conic is cut
-# by its edges (`edge_intersections`), and every arc inside the face is sampled through
-# the pencil of lines through one edge root (`conic.conic_second_intersection`: every line
-# through a point of a conic meets it in exactly one other point, so the line's angle
-# parametrises the whole conic). Samples are refined until consecutive points are closer
-# than `MAX_SEGMENT`. Every sample is an exact root of its face's conic up to rounding.
-# Arcs are chained across shared edges into connected components; along the component
-# through `M0` the signed sine `f` (seed 001 eq. 21, "plane" orientation) is evaluated.
+# The curve is traced by the library, in float64: `caustics_jax.arcs.trace_arcs` cuts each
+# face's conic by its edges (seed 001 eq. 22-24) and samples every arc inside the face
+# through the pencil of lines through its start root (`arcs.face_arcs`, `FaceArcs.point`),
+# vmapped over all faces: the same parametrisation the walk refines on and the exhaustive
+# reference scans. Each sample is checked independently of the conic code by the numpy
+# oracle's triple product (`testing.oracle.triple_product`, eq. 9). Arcs are chained across
+# shared edges into connected components (figure logic, below); along the component through
+# `M0` the objective the solvers bracket (`objectives.bracket_objective`: the signed sine `f`
+# of eq. 19-21 in the "plane" orientation) is evaluated, and its roots on every component
+# (a sign change in both orientations, `arcs.root_between`) form an independent
+# all-solutions check of the walk's `M`.
 #
 # Run: `python -m experiments.conic_curve` (writes `figures/conic_curve.png` and `.json`,
 # prints a table). Also `make figures`.
@@ -22,26 +25,26 @@
 from __future__ import annotations
 
 import functools
-import json
-import pathlib
 import time
 
 import jax
 import jax.numpy as jnp
-import matplotlib
-import matplotlib.tri
+import numpy as np
 
-matplotlib.use("Agg")
+import caustics_jax as cj
+from caustics_jax.arcs import N_ARCS, root_between, trace_arcs
+from caustics_jax.objectives import ObjectiveStatus, bracket_objective
+from caustics_jax.scenes import wavy_pool
+from caustics_jax.testing import oracle
+from experiments.common import figures_dir, log, use_agg, write_json
+
+use_agg()
+import matplotlib  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.tri  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-import caustics_jax as cj  # noqa: E402
-from caustics_jax.conic import conic_second_intersection, edge_intersection_points  # noqa: E402
-from caustics_jax.scenes import wavy_pool  # noqa: E402
-
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-FIG = ROOT / "figures" / "conic_curve.png"
+FIG = figures_dir() / "conic_curve.png"
 
 # A 14 x 14 cell heightfield (392 triangles) over a 2.1 m square, |z| <= 10 cm, wavelengths
 # 0.5-1.2 m (3-8 cells): a curve that visibly bends, still resolved by the mesh.
@@ -49,161 +52,49 @@ SCENE = dict(n_triangles=392, seed=3, amplitude=0.1, wavelength=(0.5, 1.2), half
 P_RECEIVER = (-0.6, -0.5, -0.6)  # under the water (m)
 L_LIGHT = (0.8, 0.6, 1.0)  # above it (m)
 ETA = 1.333
-N_PENCIL = 256  # initial pencil angles per face
-MAX_SEGMENT = 2e-3  # refine arcs until consecutive samples are closer than this (m)
-INSIDE_TOL = 1e-12  # barycentric slack of the inside-the-face test
+# Pencil samples per arc, uniform in the pencil angle: 256 keeps consecutive samples within
+# about 1 mm on this mesh (the JSON records the largest spacing).
+SAMPLES = 256
+INSIDE_TOL = 1e-12  # barycentric slack of the inside-the-face check of the samples
 MATCH_TOL = 1e-9  # arcs of neighbouring faces join when their ends are this close (m)
 
 
 # %% [markdown]
-# ## Tracing the conic inside each face
+# ## Tracing the conic inside each face (the library tracer)
 
 
 # %%
-def _inside(ab, tol=INSIDE_TOL):
-    return (ab[..., 0] >= -tol) & (ab[..., 1] >= -tol) & (ab[..., 0] + ab[..., 1] <= 1 + tol)
+@functools.partial(jax.jit, static_argnames="samples")
+def _trace(V, N, P, L, samples):
+    return trace_arcs(V, N, P, L, samples, return_arcs=True)
 
 
-def _interior_ellipse_anchor(coef):
-    """A point of the conic when it is an ellipse wholly inside the face (no edge root),
-    as in `solvers.exhaustive._touches`; None otherwise."""
-    A, B, C, D, E, F = coef
-    det = 4 * A * B - C * C
-    if det <= 0:
-        return None
-    centre = np.array([(C * E - 2 * B * D) / det, (C * D - 2 * A * E) / det])
-    value = (
-        A * centre[0] ** 2
-        + B * centre[1] ** 2
-        + C * centre[0] * centre[1]
-        + D * centre[0]
-        + E * centre[1]
-        + F
-    )
-    if not (_inside(centre, 0) and value * F < 0):
-        return None
-    # the line b = b_c through the centre: A a^2 + (C b_c + D) a + (B b_c^2 + E b_c + F) = 0
-    b = centre[1]
-    roots, ok = cj.solve_quadratic(
-        jnp.asarray(A), jnp.asarray(C * b + D), jnp.asarray(B * b * b + E * b + F)
-    )
-    return np.array([float(roots[1]), b]) if bool(ok[1]) else None
+def trace_curve(V, N, P, L, samples=SAMPLES):
+    """Every arc of the coplanarity curve on the faces `V, N` `(F, 3, 3)`, each once.
 
-
-def pencil_point(coef, x0, phi):
-    """Second point where the line through `x0` (on the conic) at angle `phi` meets it.
-
-    numpy transcription of `conic.conic_second_intersection` (called once per face
-    instead of once per refinement step: eager JAX dispatch would dominate the run time;
-    `run` checks the two agree). `Q(x0 + s d) = Q0 + s (grad . d) + s^2 (d^T S2 d)`; the
-    root of larger magnitude is the new point; invalid when the line is parallel to an
-    asymptote (point at infinity).
+    Returns a list of dicts (face, ab `(samples, 2)`, xyz `(samples, 3)`, closed) and the
+    conic coefficients `(F, 6)`. `face_arcs` lists an arc from each of its two end roots
+    (each oriented inward); the copy that starts at the lower root slot is kept. An
+    ellipse inside its face (the last slot) is kept when its anchor lies in the face.
     """
-    A, B, C, D, E, F = coef
-    da, db = np.cos(phi), np.sin(phi)
-    q2 = A * da * da + B * db * db + C * da * db
-    q1 = (2 * A * x0[0] + C * x0[1] + D) * da + (2 * B * x0[1] + C * x0[0] + E) * db
-    q0 = A * x0[0] ** 2 + B * x0[1] ** 2 + C * x0[0] * x0[1] + D * x0[0] + E * x0[1] + F
-    disc = q1 * q1 - 4 * q2 * q0
-    ok = (q2 != 0) & (disc > 0)
-    q = -(q1 + np.where(q1 >= 0, 1, -1) * np.sqrt(np.where(ok, disc, 0))) / 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r1, r2 = q / np.where(ok, q2, 1), q0 / np.where(q != 0, q, 1)
-    s = np.where(np.abs(r1) > np.abs(r2), r1, r2)
-    ok &= np.isfinite(s)
-    s = np.where(ok, s, 0)
-    return x0 + s[:, None] * np.stack([da, db], -1), ok
-
-
-def trace_face(coef, V, roots):
-    """Arcs of the conic `coef` inside the face `V` (3, 3): a list of `(k, 2)` barycentric
-    polylines whose ends are edge roots (or closed loops for an interior ellipse).
-
-    `roots`: `(m, 2)` barycentric edge roots of the face. The pencil through the anchor
-    `x0` (the first root) is swept over `phi in (phi_t, phi_t + pi)` from the tangent
-    direction at `x0`, so the parameter runs once around the conic from `x0` back to it
-    (a hyperbola passes through infinity in between, outside the face). The other roots
-    are inserted at their own angles, so runs of inside samples end exactly on edges.
-    """
-    closed = len(roots) == 0
-    x0 = _interior_ellipse_anchor(coef) if closed else roots[0]
-    if x0 is None:
-        return []
-    A, B, C, D, E = coef[:5]
-    tangent = np.array([-(C / 2 * x0[0] + B * x0[1] + E / 2), A * x0[0] + C / 2 * x0[1] + D / 2])
-    if not np.any(tangent):
-        return []  # singular point of a degenerate conic: not met on generic meshes
-    phi_t = np.arctan2(tangent[1], tangent[0])
-
-    def point(phi):
-        return pencil_point(coef, x0, phi)
-
-    phi = phi_t + np.pi * (np.arange(1, N_PENCIL) / N_PENCIL)
-    ab, ok = point(phi)
-    # the other edge roots at their pencil angles, reduced to (phi_t, phi_t + pi)
-    v = roots[1:] - x0
-    far = np.linalg.norm(v, axis=-1) > 1e-12
-    phi_r = phi_t + np.mod(np.arctan2(v[far, 1], v[far, 0]) - phi_t, np.pi)
-    phi = np.concatenate([[phi_t], phi, phi_r, [phi_t + np.pi]])
-    ab = np.concatenate([x0[None], ab, roots[1:][far], x0[None]])
-    keep = np.concatenate([[True], _inside(ab[1:N_PENCIL]) & ok, np.ones(far.sum() + 1, bool)])
-    order = np.argsort(phi, kind="stable")
-    phi, ab, keep = phi[order], ab[order], keep[order]
-
-    # Refine where consecutive inside samples are too far apart in the world. A midpoint
-    # outside the face splits the run there (an excursion through a corner, or the two
-    # branches of a hyperbola): run ends then stay exact edge roots.
-    e = np.stack([V[1] - V[0], V[2] - V[0]])  # (2, 3): world point = V0 + ab @ e
-    for _ in range(40):
-        gap = np.linalg.norm(np.diff(ab, axis=0) @ e, axis=-1)
-        wide = np.nonzero((gap > MAX_SEGMENT) & keep[:-1] & keep[1:])[0]
-        if len(wide) == 0:
-            break
-        mid = (phi[wide] + phi[wide + 1]) / 2
-        new, ok = point(mid)
-        phi = np.insert(phi, wide + 1, mid)
-        ab = np.insert(ab, wide + 1, new, axis=0)
-        keep = np.insert(keep, wide + 1, _inside(new) & ok)
-    arcs = []
-    for run in np.split(np.arange(len(phi)), np.nonzero(np.diff(keep.astype(int)))[0] + 1):
-        if keep[run[0]] and len(run) >= 2:  # else outside, or an isolated root (tangency,
-            arcs.append(ab[run])  # the anchor's outward side)
-    if closed and arcs:
-        arcs = [np.concatenate(arcs)]  # one loop, starting and ending at the anchor
-    return arcs
-
-
-@jax.jit
-def _conics(V, N, P, L):
-    coef = cj.conic_coefficients(V, N, P, L)
-    t, valid = cj.edge_intersections(coef)
-    return coef, edge_intersection_points(t), valid
-
-
-def trace_curve(V, N, P, L):
-    """Every arc of the coplanarity curve on the faces `V, N` `(F, 3, 3)`: a list of dicts
-    (face, ab, xyz), and the conic coefficients `(F, 6)`."""
-    coef, ab_roots, valid = (np.asarray(x) for x in _conics(V, N, P, L))
-    arcs = []
-    for f in range(len(V)):
-        roots = ab_roots[f][valid[f]]
-        if len(roots) == 0 and _interior_ellipse_anchor(coef[f]) is None:
-            continue
-        for ab in trace_face(coef[f], V[f], roots):
-            xyz = V[f, 0] + ab[:, :1] * (V[f, 1] - V[f, 0]) + ab[:, 1:] * (V[f, 2] - V[f, 0])
-            arcs.append(dict(face=f, ab=ab, xyz=xyz))
-    return arcs, coef
-
-
-def triple_product_residual(V, N, P, L, ab):
-    """`|n~ . (PL x PM)| / (|n~| |PL| |PM|)`: the relative coplanarity residual."""
-    a, b = ab[:, :1], ab[:, 1:]
-    M = V[:, 0] + a * (V[:, 1] - V[:, 0]) + b * (V[:, 2] - V[:, 0])
-    n = N[:, 0] + a * (N[:, 1] - N[:, 0]) + b * (N[:, 2] - N[:, 0])
-    c = np.sum(n * np.cross(L - P, M - P), -1)
-    return np.abs(c) / (
-        np.linalg.norm(n, axis=-1) * np.linalg.norm(L - P) * np.linalg.norm(M - P, axis=-1)
-    )
+    ab, _, _, arcs = (jax.tree.map(np.asarray, x) for x in _trace(V, N, P, L, samples))
+    V = np.asarray(V)
+    exists = arcs.ok & oracle.inside_triangle(arcs.starts, INSIDE_TOL)
+    out = []
+    for f, k in zip(*np.nonzero(exists), strict=True):
+        closed = k == N_ARCS - 1
+        if not closed:
+            # the slot of the root this arc ends on: ends are copies of the root values
+            twin = np.nonzero(np.all(arcs.starts[f, : N_ARCS - 1] == arcs.ends[f, k], -1))[0]
+            if len(twin) and twin[0] < k and exists[f, twin[0]]:
+                continue
+        # The ends are the exact edge roots: at u = 0 the pencil line is the conic's
+        # tangent, whose second intersection is a double root split by rounding (up to
+        # ~sqrt(eps) off the start, `trace_arcs`), and arcs of neighbouring faces must meet.
+        ab_k = ab[f, k].copy()
+        ab_k[0], ab_k[-1] = arcs.starts[f, k], arcs.ends[f, k]
+        out.append(dict(face=int(f), ab=ab_k, xyz=oracle.barycentric_point(V[f], ab_k), closed=bool(closed)))
+    return out, arcs.coef
 
 
 # %% [markdown]
@@ -274,28 +165,29 @@ def distance_to_polyline(q, xyz, s=None):
 
 
 # %%
-@jax.jit
-def _library_pencil(coef, x0, phi):
-    d = jnp.stack([jnp.cos(phi), jnp.sin(phi)], -1)
-    return conic_second_intersection(coef[:, None], x0[:, None], d[None])
-
-
 @functools.partial(jax.jit, static_argnames="eta")
-def _signed_sine(V, N, P, L, ab, eta):
-    """`f` with the "plane" and the "line" sign, and the status (`objectives.py`)."""
-    f, status = cj.signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
-    g, _ = cj.signed_sine_and_status(V, N, P, L, ab, eta, orientation="line")
-    return f, g, status
+def _bracket_objective(V, N, P, L, ab, eta):
+    """`(f, status, g)` of `objectives.bracket_objective` at one point per triangle."""
+    return jax.vmap(lambda v, n, x: tuple(y[0] for y in bracket_objective(v, n, P, L, x[None], eta)))(V, N, ab)
 
 
 def curve_roots(f, g, status, s):
-    """Brackets `(s_lo, s_hi)` of the roots of `f` along one component: both signs flip
-    between consecutive samples (a root, not an orientation flip; as `walk._root_between`)
-    and neither sample is under total internal reflection."""
-    ok = (status[:-1] == 0) & (status[1:] == 0)
-    flip = (np.sign(f[:-1]) * np.sign(f[1:]) < 0) & (np.sign(g[:-1]) * np.sign(g[1:]) < 0) & ok
+    """Brackets `(s_lo, s_hi)` of the roots of `f` along one component: a sign change in
+    both orientations between consecutive samples (`arcs.root_between`, as the walk and the
+    exhaustive reference judge it), both samples with status OK."""
+    ok = (status[:-1] == ObjectiveStatus.OK) & (status[1:] == ObjectiveStatus.OK)
+    flip = np.asarray(root_between((f[:-1], g[:-1]), (f[1:], g[1:]))) & ok
     i = np.nonzero(flip)[0]
     return np.stack([s[i], s[i + 1]], -1)
+
+
+def distance_to_conic(coef, ab, V):
+    """First-order world distance `|Q| / |grad_world Q|` from `ab` to the conic `coef` of
+    face `V` (the gradient of `conic.conic_value` by autodiff, mapped to the face's plane)."""
+    Q = float(cj.conic_value(jnp.asarray(coef), jnp.asarray(ab)))
+    grad_ab = np.asarray(jax.grad(cj.conic_value, argnums=1)(jnp.asarray(coef), jnp.asarray(ab)))
+    e_world = np.stack([V[1] - V[0], V[2] - V[0]])  # (2, 3): d(world point) / d(a, b)
+    return abs(Q) / float(np.linalg.norm(np.linalg.pinv(e_world) @ grad_ab))
 
 
 def run() -> tuple[dict, dict]:
@@ -303,27 +195,20 @@ def run() -> tuple[dict, dict]:
         scene = wavy_pool(**SCENE, dtype="float64")
         mesh = scene.surface
         P, L = np.array(P_RECEIVER), np.array(L_LIGHT)
-        Vf = np.asarray(mesh.vertices)[np.asarray(mesh.faces)]  # (F, 3, 3)
-        Nf = np.asarray(mesh.normals)[np.asarray(mesh.faces)]
+        Vf, Nf = oracle.NumpyMesh.from_mesh(mesh).triangles(np.arange(mesh.faces.shape[0]))
         t0 = time.perf_counter()
-        arcs, coef = trace_curve(Vf, Nf, P, L)
+        arcs, coef = trace_curve(jnp.asarray(Vf), jnp.asarray(Nf), jnp.asarray(P), jnp.asarray(L))
         trace_s = time.perf_counter() - t0
+        log(f"traced {len(arcs)} arcs in {trace_s:.1f} s")
 
-        # every sample: relative triple product (independent of the conic code) and |Q|
+        # every sample: relative triple product (oracle, independent of the conic code),
+        # |Q|, inside its face, spacing along its arc
         faces = np.concatenate([np.full(len(a["ab"]), a["face"]) for a in arcs])
         ab_all = np.concatenate([a["ab"] for a in arcs])
-        rel = triple_product_residual(Vf[faces], Nf[faces], P, L, ab_all)
+        rel = oracle.triple_product(Vf[faces], Nf[faces], P, L, ab_all, relative=True)
         conic = np.abs(np.asarray(jax.jit(cj.conic_value)(coef[faces], ab_all)))
-        # the numpy pencil against the library's conic_second_intersection, on every arc
-        x0 = np.stack([a["ab"][0] for a in arcs])
-        coef_arcs = coef[[a["face"] for a in arcs]]
-        phis = np.linspace(0.05, np.pi - 0.05, 64)
-        lib, ok_lib = (np.asarray(x) for x in _library_pencil(coef_arcs, x0, phis))
-        mine = [pencil_point(c, x, phis) for c, x in zip(coef_arcs, x0, strict=True)]
-        ok = np.stack([m[1] for m in mine])
-        mine = np.stack([m[0] for m in mine])
-        both = ok & ok_lib & _inside(mine, 1.0)  # compare near the face
-        pencil_diff = float(np.max(np.abs(mine - lib)[both], initial=0.0))
+        outside = int(np.sum(~oracle.inside_triangle(ab_all, INSIDE_TOL)))
+        spacing = max(float(np.max(np.linalg.norm(np.diff(a["xyz"], axis=0), axis=-1))) for a in arcs)
         comps, join_gap = components(arcs)
         # topology: a component is a closed loop or ends on the pool's outer boundary
         lo, hi = Vf[..., :2].min((0, 1)), Vf[..., :2].max((0, 1))
@@ -339,7 +224,7 @@ def run() -> tuple[dict, dict]:
         sol = cj.solve(mesh, P[None], L[None], eta=ETA)
         f0, fM = int(start.face[0]), int(sol.triangle[0])
         ab0, abM = np.asarray(start.barycentric)[0], np.asarray(sol.barycentric)[0]
-        M0 = Vf[f0, 0] + ab0 @ (Vf[f0, 1:] - Vf[f0, 0])
+        M0 = oracle.barycentric_point(Vf[f0], ab0)
         M = np.asarray(sol.point)[0]
         # the component through M0 (the one the walk follows), oriented toward M
         main = int(np.argmin([distance_to_polyline(M0, polyline(arcs, c)[0]) for c in comps]))
@@ -351,16 +236,15 @@ def run() -> tuple[dict, dict]:
             i0, iM = len(xyz) - 1 - i0, len(xyz) - 1 - iM
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xyz, axis=0), axis=-1))])
         s -= s[i0]
+        dist_M0 = distance_to_polyline(M0, xyz)
         dist_M, s_M = distance_to_polyline(M, xyz, s)
         # f along every component (one call): roots of f anywhere on the traced curve form
         # an independent all-solutions reference for the walk's M
-        polys = [(xyz, face_c, ab_c)] + [
-            polyline(arcs, c) for k, c in enumerate(comps) if k != main
-        ]
+        polys = [(xyz, face_c, ab_c)] + [polyline(arcs, c) for k, c in enumerate(comps) if k != main]
         cat = [np.concatenate(x) for x in zip(*polys, strict=True)]
-        f_all, g_all, st_all = (
-            np.asarray(x) for x in _signed_sine(Vf[cat[1]], Nf[cat[1]], P, L, cat[2], ETA)
-        )
+        f_all, st_all, g_all = (np.asarray(x) for x in _bracket_objective(
+            jnp.asarray(Vf[cat[1]]), jnp.asarray(Nf[cat[1]]), jnp.asarray(P), jnp.asarray(L),
+            jnp.asarray(cat[2]), ETA))
         split = np.cumsum([len(x[0]) for x in polys])[:-1]
         per_comp = [np.split(x, split) for x in (f_all, g_all, st_all)]
         f_curve, st_curve = per_comp[0][0], per_comp[2][0]
@@ -371,34 +255,29 @@ def run() -> tuple[dict, dict]:
         )
         cross = np.nonzero(np.diff(face_c))[0]
         s_edges = (s[cross] + s[cross + 1]) / 2  # where the curve crosses a triangle edge
-
-        # how far M is from the curve: relative triple product, and the first-order world
-        # distance |Q| / |grad_world Q| in its face
-        A, B, C, D, E, _ = coef[fM]
-        grad_ab = np.array([2 * A * abM[0] + C * abM[1] + D, 2 * B * abM[1] + C * abM[0] + E])
-        e_world = Vf[fM, 1:] - Vf[fM, 0]  # (2, 3); world point = V0 + ab @ e_world
-        grad_world = np.linalg.pinv(e_world) @ grad_ab  # tangent-plane gradient
-        Q_M = float(cj.conic_value(jnp.asarray(coef[fM]), jnp.asarray(abM)))
+        status_counts = {ObjectiveStatus(k).name: int(np.sum(st_curve == k)) for k in np.unique(st_curve)}
 
         out = dict(
             scene=scene.name,
-            scene_kwargs={k: list(v) if isinstance(v, tuple) else v for k, v in SCENE.items()},
+            scene_kwargs=SCENE,
             triangles=int(mesh.faces.shape[0]),
-            P=P.tolist(),
-            L=L.tolist(),
+            P=P,
+            L=L,
             eta=ETA,
             dtype="float64",
-            M0=M0.tolist(),
+            tracer="caustics_jax.arcs.trace_arcs",
+            samples_per_arc=SAMPLES,
+            M0=M0,
             M0_face=f0,
-            M=M.tolist(),
+            M=M,
             M_face=fM,
-            M_barycentric=abM.tolist(),
+            M_barycentric=abM,
             solve_status=cj.Status(int(sol.status[0])).name,
             solve_residual_f=float(sol.residual[0]),
             solve_crossed=int(sol.crossed[0]),
             solve_iterations=int(sol.iterations[0]),
             curve_edges_between_M0_and_M=int(np.sum((s_edges > 0) & (s_edges < s_M))),
-            f_roots_on_M0_component_brackets_m=roots_main.tolist(),
+            f_roots_on_M0_component_brackets_m=roots_main,
             f_roots_on_other_components=int(roots_other),
             faces_on_curve=int(len({a["face"] for a in arcs})),
             arcs=len(arcs),
@@ -407,20 +286,19 @@ def run() -> tuple[dict, dict]:
             trace_s=trace_s,
             max_rel_triple_product=float(rel.max()),
             max_abs_conic_value=float(conic.max()),
+            samples_outside_their_face=outside,
+            max_sample_spacing_m=spacing,
             max_join_gap_m=join_gap,
             open_curve_ends_not_on_boundary=int(open_inside),
-            pencil_numpy_vs_library_max_diff=pencil_diff,
-            M0_rel_triple_product=float(
-                triple_product_residual(Vf[[f0]], Nf[[f0]], P, L, ab0[None])[0]
-            ),
-            M_rel_triple_product=float(
-                triple_product_residual(Vf[[fM]], Nf[[fM]], P, L, abM[None])[0]
-            ),
-            M_distance_to_exact_curve_m=abs(Q_M) / float(np.linalg.norm(grad_world)),
+            M0_rel_triple_product=float(oracle.triple_product(Vf[f0], Nf[f0], P, L, ab0, relative=True)),
+            M0_distance_to_sampled_curve_m=dist_M0,
+            M_rel_triple_product=float(oracle.triple_product(Vf[fM], Nf[fM], P, L, abM, relative=True)),
+            M_distance_to_exact_curve_m=distance_to_conic(coef[fM], abM, Vf[fM]),
             M_distance_to_sampled_curve_m=dist_M,
             M_arc_length_from_M0_m=s_M,
             M_distance_from_M0_m=float(np.linalg.norm(M - M0)),
-            tir_fraction_of_main_component=float(np.mean(st_curve != 0)),
+            objective_status_on_M0_component=status_counts,
+            tir_fraction_of_main_component=float(np.mean(st_curve == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)),
         )
         plot_data = dict(
             mesh=mesh,
@@ -430,7 +308,7 @@ def run() -> tuple[dict, dict]:
             xyz=xyz,
             s=s,
             f=f_curve,
-            tir=st_curve != 0,
+            status=st_curve,
             s_edges=s_edges,
             P=P,
             L=L,
@@ -549,8 +427,8 @@ def plot(d, out, path=FIG):
     ax.set_ylabel("y (m)")
     ax.set_title(
         f"Top view: coplanarity curve on a wavy water surface (seed 001 Fig. 3)\n"
-        f"{out['triangles']} triangles, |z| <= {SCENE['amplitude']:g} m, float64; "
-        f"curve crosses {out['faces_on_curve']} faces; eta = {ETA}",
+        f"{out['triangles']} triangles, |z| <= {SCENE['amplitude']:g} m, float64, eta = {ETA}\n"
+        f"curve traced by caustics_jax.arcs.trace_arcs, across {out['faces_on_curve']} faces",
         fontsize=10.5,
     )
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=2, fontsize=8, frameon=False)
@@ -593,7 +471,9 @@ def plot(d, out, path=FIG):
     ax_side.grid(True, alpha=0.3)
 
     # ---- f along the component through M0
-    f, tir = d["f"], d["tir"]
+    f, status = d["f"], d["status"]
+    tir = status == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
+    backward = status == ObjectiveStatus.BACKWARD
     for se in d["s_edges"]:
         ax_f.axvline(se, color="0.88", lw=0.7, zorder=0)
     ax_f.axhline(0, color="0.3", lw=0.8)
@@ -602,7 +482,7 @@ def plot(d, out, path=FIG):
     )
     ax_f.plot(
         s,
-        np.where(tir, np.nan, f),
+        np.where(status == ObjectiveStatus.OK, f, np.nan),
         "-",
         color="C3",
         lw=1.8,
@@ -617,6 +497,16 @@ def plot(d, out, path=FIG):
             lw=3,
             solid_capstyle="butt",
             label="total internal reflection seen from P (no path)",
+        )
+    if backward.any():
+        ax_f.plot(
+            s[backward],
+            np.zeros(backward.sum()),
+            "-",
+            color="0.55",
+            lw=3,
+            solid_capstyle="butt",
+            label="refracted ray points away from L (no path)",
         )
     ax_f.plot(
         0, np.interp(0, s, f), "o", ms=9, mfc="white", mec="k", mew=2, zorder=5, label=r"$M_0$"
@@ -652,7 +542,6 @@ def plot(d, out, path=FIG):
         fontsize=10.5,
     )
     fig.tight_layout()
-    path.parent.mkdir(exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -663,14 +552,14 @@ if __name__ == "__main__":
     out, data = run()
     plot(data, out)
     out["total_s"] = time.perf_counter() - t
-    FIG.with_suffix(".json").write_text(json.dumps(out, indent=1))
+    write_json(FIG.with_suffix(".json"), out)
     rows = [
         ("scene", out["scene"]),
         (
             "faces on the curve / arcs / components",
             f"{out['faces_on_curve']} / {out['arcs']} / {out['components']}",
         ),
-        ("curve samples (float64)", f"{out['samples']:,}"),
+        ("curve samples (float64, library tracer)", f"{out['samples']:,}"),
         ("max rel. triple product on samples", f"{out['max_rel_triple_product']:.2e}"),
         ("max |conic value| on samples", f"{out['max_abs_conic_value']:.2e}"),
         ("max gap where arcs join across edges (m)", f"{out['max_join_gap_m']:.2e}"),
@@ -698,10 +587,9 @@ if __name__ == "__main__":
             "|M - M0| / arc length M0 -> M (m)",
             f"{out['M_distance_from_M0_m']:.3f} / {out['M_arc_length_from_M0_m']:.3f}",
         ),
-        (
-            "numpy pencil vs conic_second_intersection",
-            f"{out['pencil_numpy_vs_library_max_diff']:.1e}",
-        ),
+        ("samples outside their face / max spacing (m)",
+         f"{out['samples_outside_their_face']} / {out['max_sample_spacing_m']:.1e}"),
+        ("M0 distance to sampled polyline (m)", f"{out['M0_distance_to_sampled_curve_m']:.2e}"),
         ("time (trace / total, s)", f"{out['trace_s']:.1f} / {out['total_s']:.1f}"),
     ]
     for k, v in rows:
