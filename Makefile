@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test figures lint clean export conformance notebooks docs
+.PHONY: demo test figures lint typecheck clean export conformance notebooks docs
 
 # The extras of `make notebooks` and `make docs`, installed into the same .venv on first use.
 NB_STAMP   := $(VENV)/.installed-notebooks
@@ -64,6 +64,10 @@ conformance: export
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check caustics_jax experiments tests notebooks/*.py docs/_hooks.py
+
+# mypy on the package, configured in pyproject.toml [tool.mypy] (CI runs lint and typecheck first).
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis site build
