@@ -89,8 +89,9 @@ def trace_curve(V, N, P, L, samples=SAMPLES):
             if len(twin) and twin[0] < k and exists[f, twin[0]]:
                 continue
         # The ends are the exact edge roots: at u = 0 the pencil line is the conic's
-        # tangent, whose second intersection is a double root split by rounding (up to
-        # ~sqrt(eps) off the start, `trace_arcs`), and arcs of neighbouring faces must meet.
+        # tangent, whose second intersection is a double root split by rounding (off the
+        # start along the curve by up to 2e-7 in float64, `trace_arcs`), and arcs of
+        # neighbouring faces must meet.
         ab_k = ab[f, k].copy()
         ab_k[0], ab_k[-1] = arcs.starts[f, k], arcs.ends[f, k]
         out.append(dict(face=int(f), ab=ab_k, xyz=oracle.barycentric_point(V[f], ab_k), closed=bool(closed)))
