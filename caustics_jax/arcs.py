@@ -70,27 +70,39 @@ def edge_roots(coef):
 def next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
     """The first edge root met when travelling along the conic from `e` in direction `tau`.
 
-    Returns `(ok, edge, t, ab, phi)`. Excluded as candidates: roots within `64 eps` of `e`
-    (a vertex root reported on two edges), and on the entry edge the root nearest the
-    entry parameter when it is within `8 sqrt(eps)` of it (the entry point itself,
-    recomputed in this triangle's conic).
+    Returns `(ok, edge, t, ab, phi)`. Never a candidate: on the entry edge, the root
+    nearest the entry parameter when it is within `8 sqrt(eps)` of it (the entry point
+    itself, recomputed in this triangle's conic). Candidates only when no other root is
+    left: roots within `8 eps` (relative to the barycentrics' magnitude) of `e`: the same
+    point (a vertex root reported on two edges: edge roots are clamped into `[0, 1]`, so
+    such duplicates coincide to rounding), where "ahead" is undefined. A root farther
+    than that is a different point of the curve, however close: in float32 a curve that
+    clips a corner within 1e-5 of a vertex, or a start point 5e-6 from an edge, has its
+    exit there, and a `64 eps` exclusion lost the curve or sent the walk backwards.
     """
     t, valid, ab = roots
     eps = float(np.finfo(t.dtype).eps)
     v = ab - e
     dist = jnp.linalg.norm(v, axis=-1)
-    cand = valid & (dist > 64 * eps)
+    scale = jnp.sum(jnp.abs(ab), axis=-1) + jnp.sum(jnp.abs(e))
     on_entry = jnp.arange(3)[:, None] == entry_edge
     gap = jnp.where(on_entry & valid, jnp.abs(t - entry_t), jnp.inf)
     nearest = gap == jnp.min(gap)
-    cand = cand & ~(nearest & (gap < 8 * np.sqrt(eps)))
+    allowed = valid & ~(nearest & (gap < 8 * np.sqrt(eps)))
+    cand = allowed & (dist > 8 * eps * scale)
+    cand = jnp.where(jnp.any(cand), cand, allowed)
     along, across = v @ tau, v @ perp
     phi = jnp.arctan2(across, along)
     phi = jnp.where(phi < 0, phi + jnp.pi, phi)  # the cutting line's angle, in [0, pi)
     # On the tangent line itself (a straight curve: constant normals, a flat surface) the
     # line angle is 0 or pi only up to rounding; there, ahead comes first (nearest first)
-    # and behind comes last.
-    on_tangent = jnp.abs(across) <= 1e3 * eps * dist
+    # and behind comes last. The same holds for a root close to `e` on a gentle curve:
+    # its true `across` (curvature x dist^2 / 2) is below the absolute rounding of the
+    # barycentrics (`e` and the root are each off the conic by ~eps |ab|), so the sign of
+    # `across` is noise while the sign of `along` is not. Without the absolute bound a
+    # float32 root 1e-4 behind `e` read as "ahead at angle 1e-3" (arctan2(-0, -1) wraps
+    # to 0), and the walk went the wrong way in both directions (issue 14 class 6).
+    on_tangent = (jnp.abs(across) <= 1e3 * eps * dist) | (jnp.abs(across) <= 64 * eps * scale)
     phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
     phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
     i = jnp.argmin(phi)

@@ -169,7 +169,7 @@ class CompareConfig:
             raise ValueError(f"n_triangles must be >= 8, got {self.n_triangles}")
 
 
-def _scene_arrays(cfg: CompareConfig):
+def scene_arrays(cfg: CompareConfig):
     """The float64 scene, `n` receivers (floor grid) and their light endpoints, as numpy."""
     side = int(np.ceil(np.sqrt(cfg.n)))
     sc = load_scene(cfg.scene, cfg.n_triangles, "float64")
@@ -301,7 +301,7 @@ def run(cfg: CompareConfig) -> dict:
     """Run the comparison; returns a JSON-serialisable dict (rows, sweep, reference)."""
     cfg.validate()
     with precision("float64"):
-        sc64, ref_mesh, P, L = _scene_arrays(cfg)
+        sc64, ref_mesh, P, L = scene_arrays(cfg)
         n_cross = int(np.asarray(start_points(sc64.surface, P, L)[2]).sum())
         ref = reference(cfg, sc64, P, L)
     results, sweeps = [], []
