@@ -148,7 +148,7 @@ for label, rep in reports.items():
 # upper-left on the right one.
 
 # %%
-colors = dict(zip(CONFIGS, plt.cm.tab10(np.linspace(0, 1, 10)), strict=False))
+colors = {name: plt.cm.tab20(i % 20) for i, name in enumerate(CONFIGS)}
 marks = {"float32": ("o", "-"), "float64": ("s", "--")}
 fig, axes = plt.subplots(2, len(reports), figsize=(3.6 * len(reports), 6.4), squeeze=False)
 for j, (label, rep) in enumerate(reports.items()):
