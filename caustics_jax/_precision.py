@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import contextlib
+import functools
+import inspect
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 def enable_x64(enabled: bool = True) -> None:
@@ -29,7 +32,10 @@ def precision(dtype):
 
 def check_float_dtype(dtype) -> jnp.dtype:
     """Validate a dtype argument at the API boundary, and that float64 is really on."""
-    dtype = jnp.dtype(dtype)
+    try:
+        dtype = jnp.dtype(dtype)
+    except (TypeError, ValueError):
+        raise ValueError(f"dtype must be float32 or float64, got {dtype!r}") from None
     if dtype == jnp.dtype("float64") and not jax.config.jax_enable_x64:
         raise ValueError(
             "float64 requested but jax_enable_x64 is off: wrap the call in "
@@ -42,10 +48,210 @@ def check_float_dtype(dtype) -> jnp.dtype:
 
 def default_float_dtype(like, dtype=None) -> jnp.dtype:
     """The float dtype of a new array: `dtype` when given (validated), float32 when `like`
-    is float32, else float64 when x64 is on and float32 otherwise."""
+    is float32 or a half precision (float16, bfloat16: computed in float32, as the
+    kernels do), else float64 when x64 is on and float32 otherwise."""
     if dtype is not None:
         return check_float_dtype(dtype)
     in_dtype = getattr(like, "dtype", None)
-    if in_dtype is not None and jnp.dtype(in_dtype) == jnp.dtype("float32"):
+    if in_dtype is not None and jnp.issubdtype(in_dtype, jnp.floating) and jnp.dtype(in_dtype).itemsize <= 4:
         return jnp.dtype("float32")
     return jnp.dtype("float64") if jax.config.jax_enable_x64 else jnp.dtype("float32")
+
+
+# --------------------------------------------------------------------------- kernel input dtypes
+# (docs/input_contract.md, "Kernels"). One rule for every public kernel, applied by
+# `float_inputs` at its entry:
+#
+# - integers (and Python numbers) are values, not a precision: they take the float dtype
+#   of the other inputs, or the default float (float64 under x64, else float32);
+# - float16 / bfloat16 (and the float8 types) are computed in float32: the kernels'
+#   thresholds are scaled to float32/float64 epsilons and nothing here is tuned for half
+#   precision, so a half result would be silently wrong (e.g. 4.28 fixed point overflows
+#   float16's 65504);
+# - float32 and float64 promote as JAX does (float64 wins, when x64 is on);
+# - parameters (`eta`, `t_max`, ...) follow the arrays' dtype and never set it, so a
+#   float64 `eta` leaves a float32 kernel in float32 and an integer array never truncates
+#   a parameter;
+# - bool, complex and non-numeric input is refused with a ValueError naming the argument.
+
+_HALF_KINDS = ("float16", "bfloat16")
+
+
+def _dtype_of(x):
+    """dtype of an array-like, without copying jax arrays or tracers."""
+    dtype = getattr(x, "dtype", None)
+    if dtype is not None and not isinstance(x, type):
+        return jnp.dtype(dtype)
+    return np.asarray(x).dtype
+
+
+def real_input_dtype(name: str, x):
+    """The float dtype `x` asks for: None for integers and Python numbers (they take the
+    dtype of the rest), float32 for half precisions, float32/float64 otherwise.
+
+    Raises `ValueError` naming `name` for bool, complex and non-numeric input.
+    """
+    if isinstance(x, bool | np.bool_):
+        raise ValueError(f"{name} must be a real number (or an array of them), got the bool {x!r}")
+    if isinstance(x, int | float):
+        return None
+    try:
+        dtype = _dtype_of(x)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a real number or an array of real numbers, got "
+                         f"{type(x).__name__} ({exc})") from None
+    if dtype == np.bool_:
+        raise ValueError(f"{name} must hold real numbers, got dtype bool")
+    if jnp.issubdtype(dtype, jnp.integer):
+        return None
+    if not jnp.issubdtype(dtype, jnp.floating):
+        raise ValueError(f"{name} must hold real numbers (integer or float), got dtype {dtype}")
+    if dtype.itemsize < 4 or dtype.name in _HALF_KINDS:
+        return jnp.dtype("float32")
+    if dtype.itemsize > 8:  # long double: the widest float JAX has
+        dtype = jnp.dtype("float64")
+    return jnp.dtype(jax.dtypes.canonicalize_dtype(dtype))
+
+
+def result_float_dtype(*named) -> jnp.dtype:
+    """Float dtype of a kernel's result from `(name, value)` pairs (rules above)."""
+    dtypes = [d for d in (real_input_dtype(n, x) for n, x in named) if d is not None]
+    if not dtypes:
+        return jnp.dtype(jax.dtypes.canonicalize_dtype(jnp.float64))
+    return jnp.dtype(jnp.result_type(*dtypes))
+
+
+def as_float(*arrays, dtype=None):
+    """`arrays` as jax arrays of one float dtype: `dtype` when given, else by the rules
+    above (`result_float_dtype`). Returns a tuple (one array per argument)."""
+    named = [(f"argument {i}", x) for i, x in enumerate(arrays)]
+    if dtype is None:
+        dtype = result_float_dtype(*named)
+    else:
+        for n, x in named:
+            real_input_dtype(n, x)
+    return tuple(jnp.asarray(x, dtype) for x in arrays)
+
+
+def _check_integer(name: str, x):
+    """`x` unchanged when it holds integers; `ValueError` naming `name` otherwise (bool too)."""
+    if isinstance(x, bool | np.bool_):
+        raise ValueError(f"{name} must hold integers, got the bool {x!r}")
+    if isinstance(x, int):
+        return x
+    try:
+        dtype = _dtype_of(x)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must hold integers, got {type(x).__name__} ({exc})") from None
+    if dtype == np.bool_ or not jnp.issubdtype(dtype, jnp.integer):
+        raise ValueError(f"{name} must hold integers, got dtype {dtype}")
+    return x
+
+
+def _dims(annotation):
+    """Trailing-shape spec of a jaxtyping annotation (`Float[Array, "*batch 3"]`), or None."""
+    dim_str = getattr(annotation, "dim_str", None)
+    if not isinstance(dim_str, str):
+        return None
+    return dim_str.split()
+
+
+def _check_shape(fn_name: str, name: str, shape, dims) -> tuple | None:
+    """Check `shape` against jaxtyping dims; return the `*batch` part (or None)."""
+    variadic = [i for i, d in enumerate(dims) if d.startswith("*")]
+    fixed = [d for d in dims if not d.startswith("*")]
+    want = " ".join(dims)
+    if not variadic:
+        ok = len(shape) == len(dims) and all(
+            not d.isdigit() or int(d) == s for d, s in zip(dims, shape, strict=False))
+        if not ok:
+            raise ValueError(f"{fn_name}: {name} must have shape ({want}), got {tuple(shape)}")
+        return None
+    v = variadic[0]
+    head, tail = dims[:v], dims[v + 1:]
+    ok = len(shape) >= len(fixed)
+    if ok:
+        ok = all(not d.isdigit() or int(d) == s for d, s in zip(head, shape[:len(head)], strict=False))
+        ok = ok and all(not d.isdigit() or int(d) == s
+                        for d, s in zip(tail, shape[len(shape) - len(tail):], strict=False))
+    if not ok:
+        raise ValueError(f"{fn_name}: {name} must have shape ({want}), got {tuple(shape)}")
+    return tuple(shape[len(head):len(shape) - len(tail)]) if dims[v] == "*batch" else None
+
+
+def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ...] = (),
+                 dtype_arg: str | None = None):
+    """Decorator: the input contract of a public kernel, applied at its entry.
+
+    `arrays` name the float data arguments (they set the dtype), `params` the float
+    parameters (cast to it), `ints` the integer arguments (indices, ids), by the rules
+    above; `dtype_arg` names an explicit `dtype=` argument that sets the result dtype
+    instead. Shapes given as jaxtyping annotations (`Float[Array, "*batch 3"]`) are
+    checked, and the `*batch` shapes must broadcast. Violations raise `ValueError`
+    naming the function and argument; `None` arguments are left alone. Works on
+    concrete arrays and on tracers (inside jit it only casts).
+    """
+
+    def decorate(fn):
+        sig = inspect.signature(fn)
+        try:
+            hints = inspect.signature(getattr(fn, "__wrapped__", fn), eval_str=True).parameters
+        except Exception:  # noqa: BLE001  (unresolvable annotation: no shape checks)
+            hints = {}
+        dims = {n: _dims(hints[n].annotation) for n in (*arrays, *params, *ints) if n in hints}
+        for n in (*arrays, *params, *ints, *([dtype_arg] if dtype_arg else [])):
+            if n not in sig.parameters:
+                raise TypeError(f"float_inputs: {fn.__qualname__} has no argument {n!r}")
+        fn_name = fn.__name__
+
+        @functools.wraps(fn)
+        def wrapper(*args, **kwargs):
+            bound = sig.bind(*args, **kwargs)
+            bound.apply_defaults()
+            a = bound.arguments
+            given = [(n, a[n]) for n in arrays if a[n] is not None]
+            if dtype_arg is not None:
+                dtype = check_float_dtype(a[dtype_arg])
+                for n, x in given:
+                    real_input_dtype(f"{fn_name}: {n}", x)
+            else:
+                dtype = result_float_dtype(*((f"{fn_name}: {n}", x) for n, x in given))
+            batches = []
+            for n in (*arrays, *params):
+                if a[n] is None:
+                    continue
+                if n in params:
+                    real_input_dtype(f"{fn_name}: {n}", a[n])
+                a[n] = jnp.asarray(a[n], dtype)
+                if dims.get(n):
+                    batch = _check_shape(fn_name, n, a[n].shape, dims[n])
+                    if batch is not None:
+                        batches.append((n, batch))
+            for n in ints:
+                if a[n] is None:
+                    continue
+                a[n] = jnp.asarray(_check_integer(f"{fn_name}: {n}", a[n]))
+                if dims.get(n):
+                    batch = _check_shape(fn_name, n, a[n].shape, dims[n])
+                    if batch is not None:
+                        batches.append((n, batch))
+            if len(batches) > 1:
+                try:
+                    np.broadcast_shapes(*(b for _, b in batches))
+                except ValueError:
+                    shown = ", ".join(f"{n} {b}" for n, b in batches)
+                    raise ValueError(f"{fn_name}: the batch shapes of {shown} do not broadcast") from None
+            try:
+                return fn(*bound.args, **bound.kwargs)
+            except TypeError as exc:
+                if "incompatible shapes" not in str(exc):
+                    raise
+                shapes = ", ".join(f"{n} {tuple(jnp.shape(a[n]))}" for n in (*arrays, *params, *ints)
+                                   if a[n] is not None)
+                raise ValueError(f"{fn_name}: input shapes do not broadcast ({shapes})") from None
+
+        wrapper.input_contract = {"arrays": arrays, "params": params, "ints": ints,
+                                  "dtype_arg": dtype_arg}
+        return wrapper
+
+    return decorate

@@ -19,9 +19,11 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from ._precision import float_inputs
 from .geometry import dot
 
 
+@float_inputs("t", ints=("edge",))
 def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> Float[Array, "*batch 2"]:
     """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (table above)."""
     t = jnp.asarray(t)
@@ -39,6 +41,7 @@ def edge_param_from_vertex_order(edge: Int[Array, "*batch"], t: Float[Array, "*b
     return jnp.where(jnp.asarray(edge) == 2, 1 - t, t)
 
 
+@float_inputs("V", "ab")
 def barycentric_point(V: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"]):
     """World point `V0 + a (V1 - V0) + b (V2 - V0)` (seed 001 eq. 3)."""
     a, b = ab[..., 0:1], ab[..., 1:2]
@@ -62,6 +65,7 @@ def barycentric_coordinates(E1: Float[Array, "*batch 3"], E2: Float[Array, "*bat
     return jnp.stack([(g22 * r1 - g12 * r2) * inv, (g11 * r2 - g12 * r1) * inv], -1)
 
 
+@float_inputs("N", "ab")
 def interpolated_normal(N: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"]):
     """Unnormalised interpolated normal `n~ = n0 + a (n1 - n0) + b (n2 - n0)` (seed 001 eq. 6-8)."""
     return barycentric_point(N, ab)

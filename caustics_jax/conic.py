@@ -10,6 +10,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from ._precision import float_inputs
 from .barycentric import edge_barycentric
 
 
@@ -32,6 +33,7 @@ def conic_matrix(
     return jnp.einsum("...ik,...jk->...ij", Ncols, Qcols)
 
 
+@float_inputs("V", "N", "P", "L")
 def conic_coefficients(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],
@@ -58,6 +60,7 @@ def conic_coefficients(
     )
 
 
+@float_inputs("coef", "ab")
 def conic_value(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) -> Float[Array, "*batch"]:
     """`A a^2 + B b^2 + C a b + D a + E b + F` (seed 001 eq. 12)."""
     A, B, C, D, E, F = jnp.moveaxis(coef, -1, 0)
@@ -78,6 +81,7 @@ def symmetric_matrix(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3
     )
 
 
+@float_inputs("coef", "ab")
 def conic_tangent(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) -> Float[Array, "*batch 2"]:
     """Tangent `(-v, u)` of the conic at `ab` in barycentric space (seed 001 eq. 13-15).
 
@@ -93,6 +97,7 @@ def conic_tangent(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) 
     return jnp.stack([-v, u], axis=-1)
 
 
+@float_inputs("V", "t")
 def tangent_to_world(V: Float[Array, "*batch 3 3"], t: Float[Array, "*batch 2"]) -> Float[Array, "*batch 3"]:
     """`t_world = t_a (V1 - V0) + t_b (V2 - V0)` (MATH.md §2)."""
     return t[..., 0:1] * (V[..., 1, :] - V[..., 0, :]) + t[..., 1:2] * (V[..., 2, :] - V[..., 0, :])
@@ -113,6 +118,7 @@ def edge_quadratics(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3"
     return jnp.stack([e0, e1, e2], -2)
 
 
+@float_inputs("q2", "q1", "q0")
 def solve_quadratic(
     q2: Float[Array, "*batch"], q1: Float[Array, "*batch"], q0: Float[Array, "*batch"]
 ) -> tuple[Float[Array, "*batch 2"], Bool[Array, "*batch 2"]]:
@@ -157,6 +163,7 @@ def solve_quadratic(
     return jnp.where(valid, roots, 0), valid
 
 
+@float_inputs("coef", params=("tol",))
 def edge_intersections(coef: Float[Array, "*batch 6"], tol: float | None = None):
     """Intersections of the conic with the three edges (seed 001 eq. 22-24, corrected).
 

@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .arguments import real_array
 from .mesh import SurfaceMesh
 
 # Coplanarity and equal-normal tolerances, in units of the mesh dtype's epsilon (relative
@@ -69,6 +70,8 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
 
     Raises `ValueError` for anything else, or for non-finite light positions.
     """
+    if not isinstance(mesh, SurfaceMesh) and isinstance(getattr(mesh, "mesh", None), SurfaceMesh):
+        mesh = mesh.mesh  # a PreparedSurface (caustics_jax.prepare), as solve and irradiance accept
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
     _check_lights(lights_or_L)
@@ -100,9 +103,9 @@ def _check_lights(lights_or_L) -> None:
     if isinstance(lights_or_L, Lights):
         return
     try:
-        L = np.asarray(lights_or_L, np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"lights_or_L must be None, a Lights or (N, 3) positions: {exc}") from exc
+        L = real_array("lights_or_L", lights_or_L)
+    except ValueError as exc:
+        raise ValueError(f"lights_or_L must be None, a Lights or (N, 3) positions: {exc}") from None
     if L.ndim == 0 or L.shape[-1] != 3:
         raise ValueError(f"lights_or_L must be a Lights or have shape (3,) or (N, 3), got {L.shape}")
     if not np.all(np.isfinite(L)):

@@ -9,6 +9,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._precision import float_inputs
+
 
 def dot(u: Float[Array, "*batch 3"], v: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
     """Dot product over the last axis."""
@@ -22,6 +24,7 @@ def norm(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
     return jnp.where(sq > 0, jnp.sqrt(safe), 0)
 
 
+@float_inputs("v")
 def safe_normalize(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
     """`v / |v|`, and the zero vector (not NaN) where `|v| = 0`."""
     length = norm(v)
@@ -29,6 +32,7 @@ def safe_normalize(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
     return v * inv[..., None]
 
 
+@float_inputs("I", "N")
 def reflect(I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
     """GLSL `reflect`: `I - 2 dot(N, I) N` (seed 004 Alg. 2 uses it for the reflection variant)."""
     return I - 2 * dot(N, I)[..., None] * N
@@ -45,6 +49,7 @@ def refraction_k(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     return (1 - eta) * (1 + eta) + (eta * cos_i) ** 2
 
 
+@float_inputs("I", "N", params=("eta",))
 def refract(
     I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"], eta
 ) -> Float[Array, "*batch 3"]:
@@ -75,6 +80,7 @@ def _safe_sqrt(x):
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1)), 0)
 
 
+@float_inputs("cos_i", params=("eta",))
 def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     """Exact unpolarised dielectric Fresnel reflectance (the `F` of seed 001 eq. 25).
 
@@ -96,6 +102,7 @@ def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*ba
     return jnp.where(ok, (r_s**2 + r_p**2) / 2, 1)
 
 
+@float_inputs("cos_i", params=("eta",))
 def fresnel_transmittance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     """Exact unpolarised dielectric Fresnel transmittance `1 - R` (energy, not radiance)."""
     return 1 - fresnel_reflectance(cos_i, eta)

@@ -14,13 +14,15 @@ raises a `ValueError` naming the offending faces or vertices before any jitted w
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._precision import check_float_dtype, default_float_dtype
+from ._precision import check_float_dtype, default_float_dtype, float_inputs
+from .arguments import check_choice, check_real, real_array
 from .barycentric import edge_barycentric, edge_param_from_vertex_order
 
 _MAX_NAMED = 10  # how many offending indices an error message lists
@@ -37,6 +39,9 @@ class GridInfo:
     counter-clockwise seen from +z, split along the diagonal `v00 -> v11`.
     Only the xy layout is static: heights live in `SurfaceMesh.vertices` and may change
     (animated water, `eqx.tree_at`) without recompiling anything keyed on the layout.
+    `dx`, `dy` may be negative (the start-point cells are then walked in reverse,
+    `grid.grid_layout`); with exactly one of them negative the faces are clockwise seen
+    from +z, so their normals point down.
     """
 
     nx: int
@@ -114,7 +119,12 @@ class SurfaceMesh(eqx.Module):
         float dtype (float64 only when x64 is on, else float32). `grid`, when given, is
         checked against the vertices and faces.
         """
+        check_choice("normal_weighting", normal_weighting, ("angle", "area"))
+        if grid is not None and not isinstance(grid, GridInfo):
+            raise ValueError(f"grid must be None or a caustics_jax.mesh.GridInfo, got {type(grid).__name__}")
         V64, F = _validate_geometry(vertices, faces)
+        dtype = default_float_dtype(vertices, dtype)
+        _check_fits(V64, dtype)
         neighbors, neighbor_edge = _adjacency(F)
         face_n = np.cross(V64[F[:, 1]] - V64[F[:, 0]], V64[F[:, 2]] - V64[F[:, 0]])
         face_n /= np.linalg.norm(face_n, axis=-1, keepdims=True)
@@ -122,7 +132,7 @@ class SurfaceMesh(eqx.Module):
             N = _vertex_normals(V64, F, normal_weighting)
             _check_normals(N, F, face_n, what="computed")
         else:
-            N = np.asarray(normals, dtype=np.float64)
+            N = real_array("normals", normals)
             if N.shape != V64.shape:
                 raise ValueError(
                     f"normals must have shape {V64.shape} (one per vertex), got {N.shape}"
@@ -131,7 +141,7 @@ class SurfaceMesh(eqx.Module):
         N = N / np.linalg.norm(N, axis=-1, keepdims=True)
         if grid is not None:
             _check_grid(grid, V64, F)
-        dtype = default_float_dtype(vertices, dtype)
+        _warn_if_inward(V64, F, neighbors)
         return cls(
             vertices=jnp.asarray(V64, dtype=dtype),
             faces=jnp.asarray(F, dtype=jnp.int32),
@@ -153,7 +163,12 @@ class SurfaceMesh(eqx.Module):
         """
         import trimesh
 
+        if not isinstance(mesh, trimesh.Trimesh | trimesh.Scene):
+            raise ValueError(f"mesh must be a trimesh.Trimesh or trimesh.Scene (e.g. trimesh.load(path)), "
+                             f"got {type(mesh).__name__}")
         if isinstance(mesh, trimesh.Scene):
+            if not mesh.geometry:
+                raise ValueError("mesh is a trimesh.Scene without geometry")
             mesh = (
                 mesh.to_geometry() if hasattr(mesh, "to_geometry") else mesh.dump(concatenate=True)
             )
@@ -176,7 +191,11 @@ class SurfaceMesh(eqx.Module):
 
         `heights` has shape `(ny + 1, nx + 1)`; `normals`, if given, `(ny + 1, nx + 1, 3)`.
         """
-        H = np.asarray(heights, dtype=np.float64)
+        H = real_array("heights", heights)
+        x0, y0 = check_real("x0", x0), check_real("y0", y0)
+        for name, step in (("dx", dx), ("dy", dy)):
+            if check_real(name, step) == 0:
+                raise ValueError(f"{name} must be a finite non-zero real number, got {step!r}")
         if H.ndim != 2 or min(H.shape) < 2:
             raise ValueError(
                 f"heights must have shape (ny + 1, nx + 1) with nx, ny >= 1, got {H.shape}"
@@ -192,6 +211,9 @@ class SurfaceMesh(eqx.Module):
             dx=float(dx),
             dy=float(dy),
         )
+        out_dtype = default_float_dtype(heights, dtype)
+        _check_fits(H.reshape(-1, 1), out_dtype, "heights")
+        _check_fits(grid.vertex_xy(), out_dtype, "grid positions x0 + i dx, y0 + j dy")
         V = np.concatenate([grid.vertex_xy(), H.reshape(-1, 1)], axis=-1)
         if normals is not None:
             normals = np.asarray(normals).reshape(-1, 3)
@@ -224,6 +246,7 @@ class SurfaceMesh(eqx.Module):
         )
 
 
+@float_inputs(params=("t",), ints=("face", "edge"))
 def cross_edge(
     mesh: SurfaceMesh,
     face: Int[Array, "*batch"],
@@ -265,10 +288,13 @@ def _name(idx, limit: int = _MAX_NAMED) -> str:
 
 
 def _validate_geometry(vertices, faces):
-    V = np.asarray(vertices, dtype=np.float64)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise ValueError(f"vertices must have shape (V, 3), got {V.shape}")
-    F = np.asarray(faces)
+    V = real_array("vertices", vertices)
+    if V.ndim != 2 or V.shape[1] != 3 or V.shape[0] < 3:
+        raise ValueError(f"vertices must have shape (V, 3) with V >= 3, got {V.shape}")
+    try:
+        F = np.asarray(faces)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"faces must be an (F, 3) array of vertex indices: {exc}") from None
     if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
         raise ValueError(f"faces must have shape (F, 3) with F >= 1, got {F.shape}")
     if not np.issubdtype(F.dtype, np.integer):
@@ -378,7 +404,55 @@ def _check_grid(grid: GridInfo, V, F):
     if len(V) != (grid.nx + 1) * (grid.ny + 1) or not np.array_equal(F, grid.faces()):
         raise ValueError(f"vertices/faces do not follow the GridInfo layout {grid}")
     off = np.flatnonzero(
-        np.any(np.abs(V[:, :2] - grid.vertex_xy()) > 1e-9 * max(grid.dx, grid.dy), axis=-1)
+        np.any(np.abs(V[:, :2] - grid.vertex_xy()) > 1e-9 * max(abs(grid.dx), abs(grid.dy)), axis=-1)
     )
     if off.size:
         raise ValueError(f"vertices off the regular grid xy positions: vertices {_name(off)}")
+
+
+def _check_fits(V: np.ndarray, dtype, what: str = "vertices") -> None:
+    """Vertices must stay finite in the mesh's dtype: 1e39 is a float64 but overflows float32."""
+    with np.errstate(over="ignore"):
+        bad = np.flatnonzero(~np.all(np.isfinite(V.astype(dtype)), axis=-1))
+    if bad.size:
+        raise ValueError(f"{what} overflow {np.dtype(dtype).name} (|coordinate| > "
+                         f"{float(np.finfo(dtype).max):.3g}): vertices {_name(bad)}; build the mesh in "
+                         "float64 or rescale it")
+
+
+def _warn_if_inward(V: np.ndarray, F: np.ndarray, neighbors: np.ndarray) -> None:
+    """Warn when the winding makes the outward normals point away from where lights are.
+
+    "Outward" is toward the light (MATH.md §1); a mesh alone does not say where the light
+    is, so only two unambiguous cases warn:
+
+    - a closed mesh (no boundary edge) whose signed volume `sum V0 . (V1 x V2) / 6`
+      (divergence theorem) is negative: every normal points into the solid;
+    - an open mesh whose vector area `sum (V1 - V0) x (V2 - V0) / 2` points down by more
+      than half its total area: a surface seen from above, wound clockwise (its normals
+      point to -z, away from a light above it).
+
+    A closed mesh wound outward, a vertical wall, a bowl or a box open at the top do not
+    warn. A surface lit from below is legitimate and warns: silence it with
+    `warnings.filterwarnings("ignore", message="surface normals")`.
+    """
+    e1, e2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    cross = np.cross(e1, e2)
+    total = float(np.sum(np.linalg.norm(cross, axis=-1)))
+    if np.all(neighbors >= 0):
+        c = V.mean(0)  # about the centroid: the volume sum then does not cancel large offsets
+        volume = float(np.sum(np.einsum("ij,ij->i", V[F[:, 0]] - c, np.cross(V[F[:, 1]] - c, V[F[:, 2]] - c))))
+        scale = total * float(np.max(np.linalg.norm(V - c, axis=-1)))
+        if volume < -1e-9 * scale:
+            warnings.warn(
+                "surface normals point into the closed mesh (negative enclosed volume): faces are wound "
+                "clockwise seen from outside, so every lane would end TIR or LEFT_MESH. Reverse the face "
+                "winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1])", UserWarning, stacklevel=3)
+        return
+    down = float(np.sum(cross[:, 2]))
+    if down < -0.5 * total:
+        warnings.warn(
+            f"surface normals point mostly down (-z: {100 * -down / total:.0f}% of the area faces down): "
+            "normals must face the light (MATH.md §1), so with a light above, every lane would end TIR or "
+            "LEFT_MESH. Reverse the face winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1]); "
+            "if the light really is below the surface, ignore this warning", UserWarning, stacklevel=3)

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from ._precision import float_inputs
 from .barycentric import barycentric_point, interpolated_normal
 from .conic import conic_coefficients, conic_tangent, tangent_to_world
 from .geometry import dot, norm, refract, safe_normalize
@@ -42,6 +43,7 @@ def refracted_direction(V, N, P, L, ab, eta):
     return refract(-w_P, -n_s, eta)
 
 
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
 def signed_sine_and_status(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],
@@ -100,7 +102,16 @@ def signed_sine_and_status(
     return jnp.where(degenerate, 0, f), status
 
 
-def signed_sine(V, N, P, L, ab, eta, orientation: str = "tangent") -> Float[Array, "*batch"]:
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+def signed_sine(
+    V: Float[Array, "*batch 3 3"],
+    N: Float[Array, "*batch 3 3"],
+    P: Float[Array, "*batch 3"],
+    L: Float[Array, "*batch 3"],
+    ab: Float[Array, "*batch 2"],
+    eta,
+    orientation: str = "tangent",
+) -> Float[Array, "*batch"]:
     """Signed sine `f` of seed 001 eq. 19-21 (see `signed_sine_and_status`).
 
     `f = 0` exactly on refracted paths, and also (spuriously) under total internal
@@ -124,7 +135,15 @@ def orthonormal_frame(n: Float[Array, "*batch 3"]):
     return s, t
 
 
-def half_vector_residual(V, N, P, L, ab, eta) -> Float[Array, "*batch 2"]:
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+def half_vector_residual(
+    V: Float[Array, "*batch 3 3"],
+    N: Float[Array, "*batch 3 3"],
+    P: Float[Array, "*batch 3"],
+    L: Float[Array, "*batch 3"],
+    ab: Float[Array, "*batch 2"],
+    eta,
+) -> Float[Array, "*batch 2"]:
     """Tangential part of the generalised half vector in the frame of `n_s` (Walter et al. 2009).
 
     `h = -(eta_out w_L + eta_in w_P)` normalised (MATH.md §4, with `eta_out = 1`,
@@ -149,7 +168,15 @@ def _spherical_angles(d, n_s):
     return theta, phi
 
 
-def angle_difference_residual(V, N, P, L, ab, eta) -> Float[Array, "*batch 2"]:
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+def angle_difference_residual(
+    V: Float[Array, "*batch 3 3"],
+    N: Float[Array, "*batch 3 3"],
+    P: Float[Array, "*batch 3"],
+    L: Float[Array, "*batch 3"],
+    ab: Float[Array, "*batch 2"],
+    eta,
+) -> Float[Array, "*batch 2"]:
     """Spherical-angle differences between `refract(-w_P, -n_s, eta)` and `w_L` (Zeltner et al. 2020).
 
     Angles are taken in the frame of `n_s`; the azimuth difference is wrapped to

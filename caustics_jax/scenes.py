@@ -24,10 +24,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._precision import default_float_dtype
+from ._precision import check_float_dtype, default_float_dtype
+from .arguments import check_choice, check_int, check_real, real_array
 from .mesh import GridInfo, SurfaceMesh
 
 GRAVITY = 9.81
+#: Largest `n_triangles` a generator builds (64 M faces, about 5 GB of float64 vertices
+#: and adjacency on the host); larger requests are refused rather than left to exhaust memory.
+MAX_TRIANGLES = 2**26
+#: Largest `n_receivers` (receivers per side: up to 16.7 M receivers).
+MAX_RECEIVERS_PER_SIDE = 4096
+LIGHTS = ("point", "directional", "both")
 
 
 class Lights(eqx.Module):
@@ -90,6 +97,8 @@ def flat_pool(
     dtype=None,
 ) -> Scene:
     """A still pool: the plane `z = 0` as a regular grid of about `n_triangles` triangles."""
+    light_position = _check_pool(n_triangles, seed, half_size, depth, n_receivers, receiver_jitter, light,
+                                 light_position, dtype, top=0.0)
     rng = np.random.default_rng(seed)
     g = _pool_layout(half_size, n_triangles)
     mesh = SurfaceMesh.from_heightfield(
@@ -139,10 +148,13 @@ def wavy_pool(
     general mesh (`is_grid = False`). Normals are analytic: the cross product of the
     surface's partial derivatives at each vertex, not mesh averages.
     """
-    if not 0 <= choppiness < 1:
+    if not (0 <= check_real("choppiness", choppiness) < 1):
         raise ValueError(
             f"choppiness must be in [0, 1) so the surface does not fold, got {choppiness}"
         )
+    amplitude = _check_waves(amplitude, n_waves, wavelength, time, depth)
+    light_position = _check_pool(n_triangles, seed, half_size, depth, n_receivers, receiver_jitter, light,
+                                 light_position, dtype, top=amplitude)
     rng = np.random.default_rng(seed)
     g = _pool_layout(half_size, n_triangles)
     waves = _gerstner_waves(rng, amplitude, n_waves, wavelength, choppiness)
@@ -195,12 +207,19 @@ def lagoon(
     """
     from scipy.spatial import Delaunay
 
-    if floor_relief >= depth:
+    depth = check_real("depth", depth, 0, lo_open=True)
+    if not 0 <= check_real("floor_relief", floor_relief) < depth:
         raise ValueError(
-            f"floor_relief {floor_relief} must stay below depth {depth} (floor under water)"
+            f"floor_relief {floor_relief} must lie in [0, depth = {depth}) (floor under water)"
         )
+    size_np = real_array("size", size)
+    if size_np.shape != (2,) or not np.all(np.isfinite(size_np)) or np.any(size_np <= 0):
+        raise ValueError(f"size must be two finite positive lengths (width, height) in m, got {size!r}")
+    amplitude = _check_waves(amplitude, n_waves, wavelength, time, depth - floor_relief)
+    light_position = _check_pool(n_triangles, seed, 1.0, depth, n_receivers, 0.0, light, light_position,
+                                 dtype, top=amplitude)
     rng = np.random.default_rng(seed)
-    W, H = size
+    W, H = (float(x) for x in size_np)
     # Delaunay of n points in convex position-free general position: F ~ 2 n - hull.
     h = math.sqrt(W * H / max(n_triangles / 2, 1))
     mx, my = max(round(W / h), 2), max(round(H / h), 2)
@@ -241,6 +260,43 @@ def lagoon(
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _check_pool(n_triangles, seed, half_size, depth, n_receivers, receiver_jitter, light, light_position,
+                dtype, *, top: float) -> np.ndarray:
+    """The generators' shared arguments, refused with `ValueError` before any work
+    (docs/input_contract.md); returns `light_position` as a float64 `(3,)` array."""
+    check_int("n_triangles", n_triangles, 2, MAX_TRIANGLES)
+    check_int("seed", seed, 0, 2**63 - 1)
+    check_real("half_size", half_size, 0, lo_open=True)
+    check_real("depth", depth, 0, lo_open=True)
+    check_int("n_receivers", n_receivers, 1, MAX_RECEIVERS_PER_SIDE)
+    check_real("receiver_jitter", receiver_jitter, 0, 1)
+    check_choice("light", light, LIGHTS)
+    if dtype is not None:
+        check_float_dtype(dtype)
+    pos = real_array("light_position", light_position)
+    if pos.shape != (3,) or not np.all(np.isfinite(pos)) or not pos[2] > top:
+        raise ValueError(f"light_position must be a finite point (x, y, z) above the water (z > {top:g} m; "
+                         f"for a directional light, its direction from the origin), got {light_position!r}")
+    return pos
+
+
+def _check_waves(amplitude, n_waves, wavelength, time, depth) -> float:
+    """Gerstner wave arguments: `0 <= amplitude < depth` (receivers stay under water),
+    `n_waves` in [1, 1024], `wavelength = (lo, hi)` with `0 < lo <= hi`, finite `time`."""
+    depth = check_real("depth", depth, 0, lo_open=True)
+    amplitude = check_real("amplitude", amplitude, 0)
+    if not amplitude < depth:
+        raise ValueError(f"amplitude must lie in [0, {depth:g}) m (below the floor depth, so the receivers "
+                         f"stay under water), got {amplitude!r}")
+    check_int("n_waves", n_waves, 1, 1024)
+    lam = real_array("wavelength", wavelength)
+    if lam.shape != (2,) or not np.all(np.isfinite(lam)) or not 0 < lam[0] <= lam[1]:
+        raise ValueError(f"wavelength must be a range (lo, hi) in m with 0 < lo <= hi, got {wavelength!r}")
+    check_real("time", time)
+    return amplitude
+
 
 
 def _pool_layout(half_size: float, n_triangles: int) -> GridInfo:
@@ -316,9 +372,7 @@ def _pool_receivers(rng, half_size, depth, n, jitter):
 
 def _scene(mesh, R, Rn, light, light_position, is_grid, name) -> Scene:
     kinds = {"point": (False,), "directional": (True,), "both": (False, True)}
-    if light not in kinds:
-        raise ValueError(f"light must be one of {sorted(kinds)}, got {light!r}")
-    directional = kinds[light]
+    directional = kinds[check_choice("light", light, LIGHTS)]
     pos = np.asarray(light_position, dtype=np.float64)
     d = pos / np.linalg.norm(pos)
     far = 100.0

@@ -259,3 +259,100 @@ def test_shape_errors_and_bad_grid_are_rejected():
     bent[3, 0] += 0.1
     with pytest.raises(ValueError, match=r"off the regular grid xy positions: vertices \[3\]"):
         SurfaceMesh.from_arrays(bent, grid.faces(), grid=grid)
+
+
+# --------------------------------------------------------------------------- input contract
+# (docs/input_contract.md "Meshes")
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(vertices=_SQUARE_V * 1e39, dtype="float32"), r"vertices overflow float32.*vertices \[1, 2, 3\]"),
+    (dict(vertices=_SQUARE_V.astype(bool)), "vertices must hold real numbers"),
+    (dict(vertices=_SQUARE_V.astype(complex)), "vertices must hold real numbers"),
+    (dict(vertices="abc"), "vertices must hold real numbers"),
+    (dict(vertices=None), "vertices must be a real number"),
+    (dict(faces=_SQUARE_F.astype(bool)), "faces must be integer"),
+    (dict(faces=_SQUARE_F + 2**40), "out of range"),
+    (dict(normals=np.tile([0, 0, 1j], (4, 1))), "normals must hold real numbers"),
+    (dict(normals="up"), "normals must hold real numbers"),
+    (dict(normal_weighting="x"), "normal_weighting must be one of"),
+    (dict(dtype="float16"), "dtype must be float32 or float64"),
+    (dict(dtype="x"), "dtype must be float32 or float64"),
+    (dict(grid="x"), "grid must be None or a caustics_jax.mesh.GridInfo"),
+])
+def test_bad_from_arrays_arguments_are_value_errors_naming_them(kwargs, match):
+    args = dict(vertices=_SQUARE_V, faces=_SQUARE_F) | kwargs
+    with pytest.raises(ValueError, match=match):
+        SurfaceMesh.from_arrays(args.pop("vertices"), args.pop("faces"), **args)
+
+
+def test_integer_and_half_vertices_are_values_half_builds_float32():
+    assert SurfaceMesh.from_arrays(_SQUARE_V.astype(np.float16), _SQUARE_F).dtype == jnp.float32
+    mesh = SurfaceMesh.from_arrays(_SQUARE_V.astype(int), _SQUARE_F.astype(np.uint16), dtype="float64")
+    np.testing.assert_array_equal(mesh.vertices, _SQUARE_V)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(heights=np.full((3, 3), 1e39), dtype="float32"), "heights overflow float32"),
+    (dict(x0=1e39, dtype="float32"), "grid positions .* overflow float32"),
+    (dict(heights=np.ones((3, 3), bool)), "heights must hold real numbers"),
+    (dict(heights=np.ones((3, 3), complex)), "heights must hold real numbers"),
+    (dict(dx=0.0), "dx must be a finite non-zero"), (dict(dy=float("nan")), "dy must be a finite real"),
+    (dict(dx="1"), "dx must be a finite real"), (dict(x0=float("inf")), "x0 must be a finite real"),
+    (dict(normals=np.ones((2, 2, 3))), "normals must have shape"),
+])
+def test_bad_from_heightfield_arguments_are_value_errors_naming_them(kwargs, match):
+    args = dict(heights=np.zeros((3, 3)), x0=0.0, y0=0.0, dx=1.0, dy=1.0) | kwargs
+    with pytest.raises(ValueError, match=match):
+        SurfaceMesh.from_heightfield(args.pop("heights"), **args)
+
+
+@pytest.mark.parametrize("obj", ["x", None, _SQUARE_V, 3])
+def test_from_trimesh_refuses_what_is_not_a_trimesh(obj):
+    with pytest.raises(ValueError, match="trimesh.Trimesh or trimesh.Scene"):
+        SurfaceMesh.from_trimesh(obj)
+
+
+def _user_warnings(fn):
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fn()
+    return [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+
+
+def _closed_cube():
+    box = trimesh.creation.box()
+    return np.asarray(box.vertices), np.asarray(box.faces)
+
+
+def test_a_surface_wound_clockwise_warns_with_the_fix():
+    (msg,) = _user_warnings(lambda: SurfaceMesh.from_arrays(_SQUARE_V, _SQUARE_F[:, ::-1]))
+    assert "point mostly down" in msg and "faces[:, ::-1]" in msg
+    wavy = MESHES["wavy_pool"]
+    (msg,) = _user_warnings(lambda: SurfaceMesh.from_arrays(np.asarray(wavy.vertices), np.asarray(wavy.faces)[:, ::-1]))
+    assert "of the area faces down" in msg
+    V, F = _closed_cube()
+    (msg,) = _user_warnings(lambda: SurfaceMesh.from_arrays(V, F[:, ::-1]))
+    assert "into the closed mesh" in msg and "faces[:, ::-1]" in msg
+
+
+def test_legitimate_meshes_do_not_warn_about_winding():
+    V, F = _closed_cube()
+    wall = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1.0]])
+    bowl = trimesh.creation.icosphere(2)  # the lower half of a sphere, seen from above: a bowl
+    keep = bowl.triangles_center[:, 2] < 0
+    bowl_V, bowl_F = np.asarray(bowl.vertices), np.asarray(bowl.faces)[keep][:, ::-1]  # inside faces up
+    cases = {
+        "square": (_SQUARE_V, _SQUARE_F), "closed cube": (V, F),
+        "vertical wall": (wall, np.array([[0, 1, 2], [1, 3, 2]])),
+        "bowl": (bowl_V, bowl_F), "far from the origin": (V + 1e6, F),
+        **{name: (np.asarray(m.vertices), np.asarray(m.faces)) for name, m in MESHES.items()},
+    }
+    for name, (V_, F_) in cases.items():
+        used = np.unique(F_)
+        remap = np.full(len(V_), -1)
+        remap[used] = np.arange(len(used))
+        assert _user_warnings(lambda V_=V_, F_=F_, used=used, remap=remap: SurfaceMesh.from_arrays(
+            V_[used], remap[F_])) == [], name

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._precision import float_inputs
 from ..geometry import dot
 from ._util import as_float, check, check_last_axis, concrete, float_dtype
 
@@ -21,6 +22,7 @@ GAMMA = 0.95
 SCHLICK_EXPONENT = 5.0
 
 
+@float_inputs("t", params=("t_max", "gamma"))
 def intensity_attenuation(t: Float[Array, "*batch"], t_max, gamma=GAMMA) -> Float[Array, "*batch"]:
     """Underwater intensity attenuation `I_att` (seed 004 eq. 13).
 
@@ -40,11 +42,24 @@ def intensity_attenuation(t: Float[Array, "*batch"], t_max, gamma=GAMMA) -> Floa
     return jnp.where(x > gamma, 1 - (x - gamma) / (1 - gamma), 1 - (gamma - x) / gamma)
 
 
-def schlick_f0(eta) -> float:
-    """Normal-incidence reflectance `((eta - 1)/(eta + 1))^2`: Schlick's choice of `F_frac`."""
+def schlick_f0(eta):
+    """Normal-incidence reflectance `((eta - 1)/(eta + 1))^2`: Schlick's choice of `F_frac`.
+
+    A Python float for a Python number (a static constant, e.g. for `f_frac`), else an
+    array by the kernels' input contract (`_precision.float_inputs`).
+    """
+    if isinstance(eta, int | float) and not isinstance(eta, bool):
+        eta = float(eta)
+        return ((eta - 1) / (eta + 1)) ** 2
+    return _schlick_f0_array(eta)
+
+
+@float_inputs("eta")
+def _schlick_f0_array(eta):
     return ((eta - 1) / (eta + 1)) ** 2
 
 
+@float_inputs("l_dir", "n", params=("f_frac", "f_exp"))
 def fresnel_reflect_approx(
     l_dir: Float[Array, "*batch 3"],
     n: Float[Array, "*batch 3"],
@@ -66,6 +81,7 @@ def fresnel_reflect_approx(
     return f_frac + (1 - f_frac) * (1 - cos) ** as_float(f_exp, dtype)
 
 
+@float_inputs("l_dir", "n", params=("f_frac", "f_exp"))
 def fresnel_refract_approx(
     l_dir: Float[Array, "*batch 3"], n: Float[Array, "*batch 3"], f_frac, f_exp=SCHLICK_EXPONENT
 ) -> Float[Array, "*batch"]:
@@ -73,6 +89,7 @@ def fresnel_refract_approx(
     return 1 - fresnel_reflect_approx(l_dir, n, f_frac, f_exp)
 
 
+@float_inputs("L", "i_att", "F")
 def ray_intensity(L, i_att, F):
     """Photon ray intensity `R = L I_att F` (seed 004 eq. 12)."""
     dtype = float_dtype(L, i_att, F)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from .._precision import float_inputs
 from ..geometry import dot
 from ._util import as_float, check, check_last_axis, float_dtype
 
@@ -29,6 +30,7 @@ REC709 = (0.2126, 0.7152, 0.0722)
 _MAX_RADIUS = 15
 
 
+@float_inputs("z_p", "z_q", "pos_p", "pos_q", "delta", params=("eps",))
 def bilateral_weight(
     z_p: Float[Array, "*batch"],
     z_q: Float[Array, "*batch"],
@@ -54,6 +56,7 @@ def bilateral_weight(
     return w_z * w_pos
 
 
+@float_inputs("rgb", params=("weights",))
 def luminance(rgb: Float[Array, "*batch 3"], weights=REC709) -> Float[Array, "*batch"]:
     """Luminance `lum(.)` of seed 004 eq. 25-28 as a weighted channel sum (Rec. 709 default)."""
     check_last_axis(rgb, "rgb", 3)
@@ -62,6 +65,7 @@ def luminance(rgb: Float[Array, "*batch 3"], weights=REC709) -> Float[Array, "*b
     return jnp.sum(rgb.astype(dtype) * jnp.asarray(weights, dtype), axis=-1)
 
 
+@float_inputs("lum_c", params=("lum_l_min", "c_scene_factor"))
 def adaptive_kernel_params(
     lum_c: Float[Array, "*batch"], lum_l_min, c_scene_factor=C_SCENE_FACTOR
 ) -> tuple[Int[Array, "*batch"], Int[Array, "*batch"], Float[Array, "*batch"]]:
@@ -94,6 +98,7 @@ def _neighbours(a, offsets, axis: int):
     return jnp.moveaxis(shifted, axis, 0), valid
 
 
+@float_inputs("C", "depth", "pos", params=("lum_l_min", "c_scene_factor", "eps"))
 def denoise_subpass(
     C: Float[Array, "H W 3"],
     depth: Float[Array, "H W"],
@@ -139,6 +144,7 @@ def denoise_subpass(
     return total / weight[..., None]
 
 
+@float_inputs("C", "depth", "pos", params=("lum_l_min", "c_scene_factor", "eps"))
 def bilateral_denoise(
     C: Float[Array, "H W 3"],
     depth: Float[Array, "H W"],

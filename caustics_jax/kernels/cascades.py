@@ -19,9 +19,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._precision import float_inputs
 from ._util import as_float, check, check_last_axis, float_dtype
 
 
+@float_inputs("o", "l_dir", params=("z_near", "z_far"))
 def light_position(
     o: Float[Array, "*batch 3"], l_dir: Float[Array, "*batch 3"], z_near, z_far
 ) -> Float[Array, "*batch 3"]:
@@ -38,6 +40,7 @@ def light_position(
     return jnp.asarray(o, dtype) - jnp.asarray(l_dir, dtype) * jnp.asarray(back)[..., None]
 
 
+@float_inputs(params=("width", "height", "near", "far", "s", "level"), dtype_arg="dtype")
 def cascade_projection(
     width, height, near, far, s, level, dtype=jnp.float32
 ) -> Float[Array, "4 4"]:
@@ -112,6 +115,7 @@ def cascade_thread_counts(ccm0_x: int, ccm0_y: int, s: int, n_levels: int) -> tu
     return (ccm0_x * ccm0_y,) + (ring,) * (n_levels - 1)
 
 
+@float_inputs(params=("s",), ints=("level",), dtype_arg="dtype")
 def cascade_intensity_scale(
     level: Int[Array, "*batch"], s, dtype=jnp.float32
 ) -> Float[Array, "*batch"]:
@@ -126,6 +130,7 @@ def cascade_intensity_scale(
     return as_float(s, dtype) ** (2 * jnp.asarray(level).astype(dtype))
 
 
+@float_inputs(ints=("tid",))
 def cascade_dispatch(
     tid: Int[Array, "*batch"], ccm0_x: int, ccm0_y: int, s: int, n_levels: int
 ) -> tuple[Int[Array, "*batch 2"], Int[Array, "*batch"], Bool[Array, "*batch"]]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from .._precision import float_inputs
 from ..geometry import dot, safe_normalize
 from ._util import as_float, check, check_last_axis, float_dtype, safe_div, safe_sqrt
 
@@ -28,6 +29,7 @@ EMA_ALPHA = 0.8
 _MIN_COS = 1e-6
 
 
+@float_inputs("fov_y", params=("height_px",))
 def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array, "*batch"]:
     """Spread angle of a primary ray cone (Akenine-Möller et al. 2021 §2, RTG1 ch. 20 eq. 30).
 
@@ -42,6 +44,7 @@ def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array,
     return jnp.arctan(2 * jnp.tan(fov_y / 2) / as_float(height_px, dtype))
 
 
+@float_inputs("width", "spread", "t", params=("surface_spread", "roughness_spread"))
 def ray_cone_propagate(
     width: Float[Array, "*batch"],
     spread: Float[Array, "*batch"],
@@ -67,6 +70,7 @@ def ray_cone_propagate(
     return new_width, new_spread
 
 
+@float_inputs("width", params=("cap",))
 def ray_cone_radius(width: Float[Array, "*batch"], cap=RADIUS_CAP) -> Float[Array, "*batch"]:
     """Collection radius at a secondary hit: half the ray-cone width, capped (seed 000 §3)."""
     check(width, "width", lower=0)
@@ -76,6 +80,7 @@ def ray_cone_radius(width: Float[Array, "*batch"], cap=RADIUS_CAP) -> Float[Arra
     return jnp.minimum(width.astype(dtype) / 2, as_float(cap, dtype))
 
 
+@float_inputs("t", "spread", "cos_theta", params=("cap",))
 def pixel_footprint_radius(
     t: Float[Array, "*batch"],
     spread: Float[Array, "*batch"],
@@ -100,6 +105,7 @@ def pixel_footprint_radius(
     return jnp.minimum(r, as_float(cap, dtype))
 
 
+@float_inputs("center", "normal", "radius")
 def cylinder_aabb(
     center: Float[Array, "*batch 3"],
     normal: Float[Array, "*batch 3"],
@@ -123,6 +129,7 @@ def cylinder_aabb(
     return center - half, center + half
 
 
+@float_inputs("point", "center", "normal", "radius")
 def in_cylinder(
     point: Float[Array, "*batch 3"],
     center: Float[Array, "*batch 3"],
@@ -141,6 +148,7 @@ def in_cylinder(
     return (jnp.abs(axial) <= r * as_float(HEIGHT_FRACTION / 2, dtype)) & (radial2 <= r * r)
 
 
+@float_inputs("p_prev", "n_prev", "p", "n", "r", ints=("m_prev", "m"))
 def reuse_accepted(
     p_prev: Float[Array, "*batch 3"],
     n_prev: Float[Array, "*batch 3"],
@@ -167,6 +175,7 @@ def reuse_accepted(
     return close & aligned & (jnp.asarray(m_prev) == jnp.asarray(m))
 
 
+@float_inputs("p_prev", "p", "r")
 def reuse_weight(
     p_prev: Float[Array, "*batch 3"], p: Float[Array, "*batch 3"], r: Float[Array, "*batch"]
 ) -> Float[Array, "*batch"]:
@@ -187,6 +196,7 @@ def reuse_weight(
     return jnp.where(ok, w, jnp.where(d2 == 0, 1, 0).astype(dtype))
 
 
+@float_inputs("tau", "intensity", "r")
 def resolve(tau, intensity, r: Float[Array, "*batch"]):
     """Resolve accumulated intensity to radiance (seed 000 eq. 1): `L_o = tau I / (pi r^2)`.
 
@@ -200,6 +210,7 @@ def resolve(tau, intensity, r: Float[Array, "*batch"]):
     return safe_div(jnp.asarray(tau, dtype) * jnp.asarray(intensity, dtype), area)
 
 
+@float_inputs("L_hat", "L", params=("alpha",))
 def temporal_ema(L_hat, L, alpha=EMA_ALPHA):
     """Temporal exponential moving average (seed 000 eq. 2): `alpha L_hat + (1 - alpha) L`.
 
@@ -212,6 +223,7 @@ def temporal_ema(L_hat, L, alpha=EMA_ALPHA):
     return alpha * jnp.asarray(L_hat, dtype) + (1 - alpha) * jnp.asarray(L, dtype)
 
 
+@float_inputs("p", "n", "r", "p_prev", "n_prev", "r_prev", "L_prev", ints=("m", "m_prev"))
 def gather_previous(
     p: Float[Array, "n 3"],
     n: Float[Array, "n 3"],

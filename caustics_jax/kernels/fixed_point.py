@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, UInt32
 
+from .._precision import float_inputs
 from ._util import check
 
 FRACTION_BITS = 28
@@ -43,6 +44,7 @@ class FixedPointSum(eqx.Module):
     value: Float[Array, " segments"]
 
 
+@float_inputs("x")
 def fixed_point_encode(x: Float[Array, "*batch"]) -> UInt32[Array, "*batch"]:
     """Float to unsigned 4.28 fixed point, round to nearest (seed 000 §3.2).
 
@@ -60,12 +62,14 @@ def fixed_point_encode(x: Float[Array, "*batch"]) -> UInt32[Array, "*batch"]:
     return scaled.astype(jnp.uint32)
 
 
+@float_inputs(ints=("code",), dtype_arg="dtype")
 def fixed_point_decode(code: UInt32[Array, "*batch"], dtype=jnp.float32) -> Float[Array, "*batch"]:
     """Unsigned 4.28 fixed point to float of `dtype` (seed 000 §3.2)."""
     code = jnp.asarray(code, dtype=jnp.uint32)
     return code.astype(dtype) * jnp.asarray(RESOLUTION, dtype)
 
 
+@float_inputs("x", ints=("segment_ids",))
 def fixed_point_accumulate(
     x: Float[Array, " n"],
     segment_ids: Int[Array, " n"] | None = None,

@@ -11,10 +11,12 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from .._precision import float_inputs
 from ..geometry import dot
 from ._util import check_last_axis, float_dtype, safe_div, safe_sqrt
 
 
+@float_inputs("pos_water", "pos_terrain", "dir_refraction")
 def projected_photon_position(
     pos_water: Float[Array, "*batch 3"],
     pos_terrain: Float[Array, "*batch 3"],
@@ -35,6 +37,7 @@ def projected_photon_position(
     return W + s[..., None] * D
 
 
+@float_inputs("origin", "direction", "plane_point", "plane_normal")
 def ray_plane_intersection(
     origin: Float[Array, "*batch 3"],
     direction: Float[Array, "*batch 3"],

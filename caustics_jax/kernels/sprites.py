@@ -12,6 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._precision import float_inputs
 from ..geometry import dot, safe_normalize
 from ._util import as_float, check, check_last_axis, float_dtype, safe_div
 
@@ -21,6 +22,7 @@ FORESHORTENING_EPS = 1e-3
 PATCH = ((-1.0, 1.0), (1.0, 1.0), (-1.0, -1.0), (1.0, -1.0))
 
 
+@float_inputs("sigma", params=("q0",))
 def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*batch"]):
     """Sprite side `q` (seed 004 eq. 16).
 
@@ -38,6 +40,7 @@ def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*bat
     return as_float(spacing * q0, dtype) * sigma.astype(dtype)
 
 
+@float_inputs("l_dir", "n_hit", params=("eps",))
 def sprite_foreshortening(
     l_dir: Float[Array, "*batch 3"], n_hit: Float[Array, "*batch 3"], eps=FORESHORTENING_EPS
 ) -> Float[Array, "*batch"]:
@@ -53,6 +56,7 @@ def sprite_foreshortening(
     return 1 / (cos + as_float(eps, dtype))
 
 
+@float_inputs("l_dir", "n_hit")
 def sprite_basis(
     l_dir: Float[Array, "*batch 3"], n_hit: Float[Array, "*batch 3"]
 ) -> tuple[Float[Array, "*batch 3"], Float[Array, "*batch 3"]]:
@@ -79,6 +83,7 @@ def sprite_basis(
     return lp_F, jnp.cross(n, lp_F)
 
 
+@float_inputs("x_hit", "q", "a", "lp_F", "lp_R")
 def sprite_corners(
     x_hit: Float[Array, "*batch 3"],
     q: Float[Array, "*batch"],
@@ -97,6 +102,7 @@ def sprite_corners(
     return jnp.asarray(x_hit, dtype)[..., None, :] + q * (along + across) / 2
 
 
+@float_inputs("R", "a", "q")
 def sprite_intensity(R, a: Float[Array, "*batch"], q: Float[Array, "*batch"]):
     """Sprite intensity `I = R / (a q^2)` (seed 004 eq. 20); 0 for a zero-size sprite."""
     dtype = float_dtype(R, a, q)

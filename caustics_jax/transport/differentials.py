@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from .._precision import float_inputs
 from ..barycentric import barycentric_coordinates, interpolated_normal
 from ..geometry import dot, norm, refract, refraction_k, safe_div, safe_normalize
 from ..objectives import orthonormal_frame, path_vectors
@@ -74,6 +75,7 @@ def _triangle_ok(E1, E2, tiny):
     return norm(jnp.cross(E1, E2)) > tiny * norm(E1) * norm(E2)
 
 
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
 @jax.jit
 def ray_differential_D(
     V: Float[Array, "*batch 3 3"],
@@ -171,6 +173,7 @@ def _autodiff_D_one(V, N, P, L, ab, eta):
 _autodiff_D_vectorized = jnp.vectorize(_autodiff_D_one, signature="(3,3),(3,3),(3),(3),(2),()->()")
 
 
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
 @jax.jit
 def autodiff_D(
     V: Float[Array, "*batch 3 3"],

@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._precision import float_inputs
 from ..barycentric import barycentric_coordinates, interpolated_normal
 from ..geometry import dot, norm, reflect, refract, safe_div, safe_normalize
 from ..mesh import SurfaceMesh
@@ -79,6 +80,8 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     return jnp.where(ok, sigma, 0), ok
 
 
+@float_inputs("x00", "x10", "x01", "n00", "n10", "n01", "l_dir", "t_hit", "l_dir10", "l_dir01",
+               params=("eta", "scale", "level"))
 def compression_ratio(
     x00: Float[Array, "*batch 3"], x10: Float[Array, "*batch 3"], x01: Float[Array, "*batch 3"],
     n00: Float[Array, "*batch 3"], n10: Float[Array, "*batch 3"], n01: Float[Array, "*batch 3"],
@@ -123,6 +126,8 @@ def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir
     return jnp.where(ok, safe_div(triangle_area(*hits), A, ok), 0), ok
 
 
+@float_inputs("x00", "x10", "x01", "n00", "n10", "n01", "l_dir", "receiver_point",
+               "receiver_normal", "l_dir10", "l_dir01", params=("eta",))
 def compression_ratio_exact(
     x00, x10, x01, n00, n10, n01, l_dir, receiver_point, receiver_normal, *, eta=1.333,
     mode: str = "refract", l_dir10=None, l_dir01=None,
@@ -178,6 +183,7 @@ _texel_vectorized = jnp.vectorize(
     _texel_one, signature="(3,3),(3,3),(3),(3),(),(3),(3)->(2,2),(3),(),(),(),(),()")
 
 
+@float_inputs("V", "N", "L", "X", "receiver_point", "receiver_normal", params=("eta",))
 @jax.jit
 def texel_jacobian(
     V: Float[Array, "*batch 3 3"], N: Float[Array, "*batch 3 3"], L: Float[Array, "*batch 3"],
@@ -198,6 +204,8 @@ def texel_jacobian(
                              normal)
 
 
+@float_inputs("V", "N", "L", "X", "receiver_point", "receiver_normal",
+               params=("eta", "intensity", "sigma_t"))
 @jax.jit
 def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, receiver_normal,
                                    sigma_t=0.0):
@@ -221,6 +229,7 @@ def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, r
 # --------------------------------------------------------------------------- footprints
 
 
+@float_inputs("dY_du", "dY_dv")
 def footprint_ellipse(dY_du: Float[Array, "*batch 2"], dY_dv: Float[Array, "*batch 2"]):
     """Elliptical footprint of a photon differential (seed 003): semi-axes, axis directions, area.
 

@@ -24,18 +24,22 @@ in float64, so 10^7-10^8 photons run in minutes on a CPU.
 from __future__ import annotations
 
 import functools
-import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arguments import check_eta, check_int, check_points, check_real
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
 from ..progress import progress as progress_bar
 from ..start_points import build_bvh, first_crossing
+
+#: Largest `n_photons` of one `photon_irradiance` call (about a day of tracing on a CPU at
+#: 10^7 photons/s): a larger count is a typo, refused rather than left running.
+MAX_PHOTONS = 2**40
 
 
 class ReceiverGrid(NamedTuple):
@@ -87,14 +91,26 @@ class ReceiverGrid(NamedTuple):
         pts = pts.reshape(self.ny, k, self.nx, k, 3).transpose(0, 2, 1, 3, 4)
         return pts.reshape(self.ny, self.nx, k * k, 3)
 
+    @classmethod
+    def check(cls, receiver, name: str = "receiver", *, allow_empty: bool = False) -> ReceiverGrid:
+        """`receiver` (a `ReceiverGrid` or its 7 fields) validated: finite bounds with
+        `x1 > x0`, `y1 > y0`, integer `nx, ny` in `[1, 2^15]` (`[0, 2^15]` with
+        `allow_empty`: an empty grid); `ValueError` naming `name` otherwise."""
+        try:
+            grid = cls(*receiver)
+        except TypeError:
+            raise ValueError(f"{name} must be a ReceiverGrid(z, x0, x1, y0, y1, nx, ny), got {receiver!r}") from None
+        for field in ("z", "x0", "x1", "y0", "y1"):
+            check_real(f"{name}.{field}", getattr(grid, field))
+        nx, ny = (check_int(f"{name}.{f}", getattr(grid, f), 0 if allow_empty else 1, 2**15) for f in ("nx", "ny"))
+        grid = grid._replace(**{f: float(getattr(grid, f)) for f in ("z", "x0", "x1", "y0", "y1")}, nx=nx, ny=ny)
+        if not (grid.x1 > grid.x0 and grid.y1 > grid.y0):
+            raise ValueError(f"{name} needs x1 > x0 and y1 > y0, got {grid}")
+        return grid
+
     def validate(self) -> None:
-        vals = (self.z, self.x0, self.x1, self.y0, self.y1)
-        if not all(math.isfinite(v) for v in vals):
-            raise ValueError(f"receiver bounds must be finite, got {self}")
-        if not (self.x1 > self.x0 and self.y1 > self.y0):
-            raise ValueError(f"receiver needs x1 > x0 and y1 > y0, got {self}")
-        if self.nx < 1 or self.ny < 1:
-            raise ValueError(f"receiver needs nx, ny >= 1, got {self.nx}, {self.ny}")
+        """Raise `ValueError` unless the grid is usable (see `check`)."""
+        ReceiverGrid.check(self)
 
 
 class EmissionPlane(NamedTuple):
@@ -118,7 +134,7 @@ class EmissionPlane(NamedTuple):
         z_e = hi[2] + 1e-3 * max(hi[2] - lo[2], 1e-3 * float(np.max(hi[:2] - lo[:2])))
         L = np.asarray(L, np.float64).reshape(3)
         if not L[2] > z_e:
-            raise ValueError(f"the light (z = {L[2]}) must be above the surface (max z = {hi[2]})")
+            raise ValueError(f"L, the light (z = {L[2]}), must be above the surface (max z = {hi[2]})")
         return cls(float(z_e), float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
 
 
@@ -210,20 +226,28 @@ def photon_irradiance(mesh: SurfaceMesh, L, *, intensity: float, eta: float = 1.
 
     Traced in the mesh's dtype; binned in float64.
     """
-    receiver = ReceiverGrid(*receiver)
-    receiver.validate()
-    if n_photons < 1 or chunk < 1:
-        raise ValueError("n_photons and chunk must be >= 1")
-    if not (np.isfinite(intensity) and intensity >= 0):
-        raise ValueError(f"intensity must be finite and >= 0, got {intensity}")
-    if not (np.isfinite(eta) and eta > 0) or not (np.isfinite(sigma_t) and sigma_t >= 0):
-        raise ValueError("eta must be finite and > 0, sigma_t finite and >= 0")
-    L_np = np.asarray(L, np.float64)
-    if L_np.shape != (3,) or not np.all(np.isfinite(L_np)):
-        raise ValueError(f"L must be one finite point of shape (3,), got {L_np.shape}")
+    if not isinstance(mesh, SurfaceMesh):
+        raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
+    receiver = ReceiverGrid.check(receiver, allow_empty=True)
+    n_photons = check_int("n_photons", n_photons, 0, MAX_PHOTONS)
+    chunk = check_int("chunk", chunk, 1, 2**24)
+    seed = check_int("seed", seed, 0, 2**32 - 1)
+    intensity = check_real("intensity", intensity, 0)
+    eta = check_eta(eta)
+    sigma_t = check_real("sigma_t", sigma_t, 0)
+    if progress is not None and not callable(progress):
+        raise ValueError(f"progress must be None or a callable progress(done, total), got {progress!r}")
+    L_np = check_points("L", L, mesh.dtype)
+    if L_np.shape != (3,):
+        raise ValueError(f"L must be one point of shape (3,), got {L_np.shape}")
     plane = EmissionPlane.covering(mesh, L_np)
     if receiver.z >= float(np.min(np.asarray(mesh.vertices)[:, 2])):
-        raise ValueError("the receiver plane must lie below the surface")
+        raise ValueError(f"the receiver plane (receiver.z = {receiver.z}) must lie below the surface")
+    shape = (receiver.ny, receiver.nx)
+    if n_photons == 0 or receiver.nx * receiver.ny == 0:  # nothing emitted, or nowhere to bin
+        zeros = np.zeros(shape)
+        return PhotonMap(irradiance=zeros, stderr=zeros.copy(), hits=np.zeros(shape, np.int64),
+                         n_photons=0 if n_photons == 0 else -(-n_photons // chunk) * chunk, receiver=receiver)
     dtype = mesh.dtype
     bvh = None if mesh.grid is not None else build_bvh(mesh)
     n_chunks = -(-n_photons // chunk)
@@ -250,7 +274,6 @@ def photon_irradiance(mesh: SurfaceMesh, L, *, intensity: float, eta: float = 1.
             bar.update(chunk)
             if progress is not None:
                 progress((i + 1) * chunk, total)
-    shape = (receiver.ny, receiver.nx)
     area = receiver.cell_area
     return PhotonMap(irradiance=(E / area).reshape(shape), stderr=(np.sqrt(E2) / area).reshape(shape),
                      hits=hits.reshape(shape), n_photons=total, receiver=receiver)

@@ -1,0 +1,150 @@
+"""Checks of API arguments, shared by every public entry point (docs/input_contract.md).
+
+Each check raises `ValueError` naming the argument and its valid range, on the host,
+before any jitted work, and returns the value in a canonical Python/numpy form. They sit
+below every layer (numpy only), so meshes, scenes, solvers, transport and the CLI all
+use the same ones: an option is refused with the same words wherever it is given.
+
+Real numbers are Python `int`/`float`, numpy integer/float scalars or 0-d arrays, and
+concrete 0-d jax arrays; `bool` is never a number here (`True` as a tolerance is a bug
+in the caller), complex numbers and strings never are.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+#: Largest iteration cap (the counters are int32).
+MAX_INT32 = 2**31 - 1
+
+
+def _real_dtype(dtype) -> bool:
+    dtype = np.dtype(dtype)
+    return dtype != np.bool_ and (np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating))
+
+
+def is_real_scalar(value) -> bool:
+    """True for one real number (see the module docstring); False for bool, complex, str,
+    arrays of more than one element and tracers."""
+    if isinstance(value, bool | np.bool_):
+        return False
+    if isinstance(value, numbers.Real):
+        return True
+    dtype, ndim = getattr(value, "dtype", None), getattr(value, "ndim", None)
+    if dtype is None or ndim != 0:
+        return False
+    try:
+        if not _real_dtype(dtype):
+            return False
+        float(value)  # a tracer refuses here: not a host value
+    except Exception:  # noqa: BLE001  (jax dtypes numpy does not know, tracers)
+        return False
+    return True
+
+
+def check_int(name: str, value, lo: int, hi: int = MAX_INT32) -> int:
+    """An integer (not a bool) in `[lo, hi]`; returns it as an int."""
+    ok = not isinstance(value, bool | np.bool_) and (
+        isinstance(value, numbers.Integral)
+        or (getattr(value, "ndim", None) == 0 and np.issubdtype(getattr(value, "dtype", np.float64), np.integer)))
+    if not ok or not lo <= int(value) <= hi:
+        raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+    return int(value)
+
+
+def check_real(name: str, value, lo: float = -math.inf, hi: float = math.inf, *, lo_open: bool = False,
+               hi_open: bool = False) -> float:
+    """A finite real number in `[lo, hi]` (open ends with `lo_open`/`hi_open`); returns a float."""
+    ok = is_real_scalar(value) and math.isfinite(float(value))
+    if ok:
+        v = float(value)
+        ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        raise ValueError(f"{name} must be a finite real number in {_interval(lo, hi, lo_open, hi_open)}, "
+                         f"got {value!r}")
+    return float(value)
+
+
+def _interval(lo, hi, lo_open, hi_open) -> str:
+    return f"{'(' if lo_open or lo == -math.inf else '['}{lo}, {hi}{')' if hi_open or hi == math.inf else ']'}"
+
+
+def check_tol(name: str, value, *, optional: bool = True):
+    """A finite real in `(0, 1)` (or None when `optional`); returns it as a float.
+
+    Acceptance is `|f| <= tol` on the signed sine `f` (seed 001 eq. 21), which lies in
+    `[-1, 1]`: a `tol` of 1 or more accepts every point.
+    """
+    if value is None and optional:
+        return None
+    if not is_real_scalar(value) or not math.isfinite(float(value)) or not 0 < float(value) < 1:
+        raise ValueError(
+            f"{name} must be a finite real number in (0, 1) (|signed sine| <= {name} accepts a point; "
+            f"the sine is at most 1), got {value!r}")
+    return float(value)
+
+
+def check_choice(name: str, value, choices) -> str:
+    """One of `choices` (strings)."""
+    if not isinstance(value, str) or value not in choices:
+        raise ValueError(f"{name} must be one of {tuple(choices)}, got {value!r}")
+    return value
+
+
+def check_bool(name: str, value) -> bool:
+    """True or False (Python or numpy bool; not 0/1, not a string)."""
+    if not isinstance(value, bool | np.bool_):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def check_eta(eta, name: str = "eta") -> float:
+    """The index ratio `eta_in / eta_out` (MATH.md §1): one finite positive real number."""
+    if not is_real_scalar(eta) or not math.isfinite(float(eta)) or float(eta) <= 0:
+        raise ValueError(
+            f"{name} must be one finite positive real number (eta_in / eta_out, water 1.333), got {eta!r}")
+    return float(eta)
+
+
+def real_array(name: str, value, *, dtype=np.float64) -> np.ndarray:
+    """`value` as a numpy array of real numbers (integers promoted to `dtype`); refuses
+    bool, complex, strings, objects and ragged input with a `ValueError` naming `name`."""
+    if value is None:
+        raise ValueError(f"{name} must be a real number or an array of real numbers, got None")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an array of real numbers: {exc}") from None
+    if not _real_dtype(arr.dtype):
+        raise ValueError(f"{name} must hold real numbers (integer or float), got dtype {arr.dtype}")
+    return arr.astype(dtype)
+
+
+def check_points(name: str, value, dtype) -> np.ndarray:
+    """`value` as a float64 numpy array of shape `(..., 3)`: real numbers, finite, and
+    finite after the cast to `dtype` (no float32 overflow)."""
+    X = real_array(name, value)
+    if X.ndim == 0 or X.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) (or broadcast to it), got {X.shape}")
+    with np.errstate(over="ignore"):
+        bad = ~np.all(np.isfinite(X) & np.isfinite(X.astype(dtype)), axis=-1)
+    if np.any(bad):
+        rows = np.nonzero(bad.reshape(-1))[0][:10].tolist()
+        raise ValueError(f"{name} has NaN or Inf coordinates, or coordinates that overflow "
+                         f"{np.dtype(dtype).name}, at rows {rows}")
+    return X
+
+
+def check_dtype(name: str, value) -> np.dtype:
+    """A dtype-like naming float32 or float64 (not yet checked against x64; see
+    `_precision.check_float_dtype`)."""
+    try:
+        dtype = np.dtype(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 'float32' or 'float64', got {value!r}") from None
+    if dtype not in (np.dtype("float32"), np.dtype("float64")):
+        raise ValueError(f"{name} must be 'float32' or 'float64', got {value!r}")
+    return dtype
