@@ -154,15 +154,31 @@ def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
                    help="write the Pareto figure (PNG) to this path (default: none)")
 
 
+def _selection(named, everything) -> list[str] | None:
+    """`--kernels` / `--scenes` as given: None when absent, [] for `none`, all for `all`."""
+    if named is None:
+        return None
+    if named == ["none"]:
+        return []
+    return list(everything) if named == ["all"] else named
+
+
 def _export(args) -> int:
     from . import export
 
+    kernels = _selection(args.kernels, export.KERNELS)
+    scenes = _selection(args.scenes, export.SCENES)
+    if kernels is None and scenes is None:  # nothing named: everything
+        kernels, scenes = list(export.KERNELS), list(export.SCENES)
+    kernels, scenes = kernels or [], scenes or []  # one group named: only that one
     try:
-        written = export.export(args.out, kernels=args.kernels, count=args.count, seed=args.seed)
+        written = export.export(args.out, kernels=kernels, count=args.count, seed=args.seed, scenes=scenes,
+                                lanes=args.lanes)
     except ValueError as exc:
         print(f"caustics-jax export: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {len(written)} files to {args.out} (kernels: {', '.join(args.kernels or export.KERNELS)})")
+    print(f"wrote {len(written)} files to {args.out} (kernels: {', '.join(kernels) or 'none'}; "
+          f"scenes: {', '.join(scenes) or 'none'})")
     return 0
 
 
@@ -170,17 +186,23 @@ def _conformance(args) -> int:
     from .shaders import conformance
 
     argv = [args.data] + (["--kernels", *args.kernels] if args.kernels else [])
+    argv += ["--scenes", *args.scenes] if args.scenes else []
     return conformance.main(argv + (["--json", args.json] if args.json else []))
 
 
 def _add_export_args(p: argparse.ArgumentParser) -> None:
-    from .export import KERNELS
+    from .export import KERNELS, SCENES
 
     p.add_argument("--out", required=True, help="output directory (created if missing)")
     p.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL",
-                   help=f"kernels to export (default: all of {', '.join(KERNELS)})")
+                   help=f"kernels to export, 'all' or 'none' (default: all of {', '.join(KERNELS)}, unless only "
+                        "--scenes is given)")
+    p.add_argument("--scenes", nargs="+", default=None, metavar="SCENE",
+                   help=f"scenes to export, 'all' or 'none' (default: all of {', '.join(SCENES)}, unless only "
+                        "--kernels is given)")
     p.add_argument("--count", type=int, default=256,
                    help="random + planted records per kernel (a quarter planted); adversarial cases come on top")
+    p.add_argument("--lanes", type=int, default=256, help="lanes per scene")
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes")
 
 
@@ -194,11 +216,13 @@ def main(argv=None) -> int:
         "demo", help="the main job: compare on the default wavy pool (`make demo` writes figures/solver_comparison.*)"),
         demo=True)
     _add_export_args(sub.add_parser(
-        "export", help="reference data for shader tests: <kernel>.json + .bin per kernel, C header"))
+        "export", help="reference data for shader tests: <kernel>.json + .bin per kernel, <scene>.json + .bin "
+                       "per scene, C headers"))
     conf = sub.add_parser("conformance", help="run the GLSL ports on a Vulkan device against exported data")
     conf.add_argument("data", help="directory written by `caustics-jax export`")
     conf.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL")
-    conf.add_argument("--json", default=None, help="write the per-kernel reports as JSON here")
+    conf.add_argument("--scenes", nargs="+", default=None, metavar="SCENE")
+    conf.add_argument("--json", default=None, help="write the per-kernel and per-scene reports as JSON here")
     args = parser.parse_args(argv)
     if args.command == "export":
         return _export(args)

@@ -153,6 +153,70 @@ def test_references_agree_with_independent_closed_forms(data):
     assert np.all(r["D"][r["valid"] == 0] == 0)
 
 
+def test_pipeline_kernel_references_agree_with_closed_forms(data):
+    """The seven pipeline kernels, checked on their planted (and some adversarial) cases
+    against closed forms written here from the papers, not from the package."""
+    _, r = ex.load(data, "cross_edge")  # barycentric.py's table: t = 0 at vertex k, edge 2 reversed
+    crossed = r["next_face"] >= 0
+    k = r["edge"]
+    assert np.all(r["next_face"] == np.where(np.take_along_axis(r["neighbor"], k[:, None], 1)[:, 0] >= 0,
+                                             np.take_along_axis(r["neighbor"], k[:, None], 1)[:, 0], -1))
+    s = np.where(k == 2, 1 - r["t"].astype(np.float64), r["t"])
+    k2 = r["next_edge"]
+    t_next = np.where(k2 == 2, s, 1 - s)
+    np.testing.assert_allclose(r["next_t"][crossed], t_next[crossed], atol=1e-7)
+    table = {0: lambda t: (t, 0 * t), 1: lambda t: (1 - t, t), 2: lambda t: (0 * t, t)}
+    for e, fn in table.items():
+        sel = crossed & (k2 == e)
+        np.testing.assert_allclose(r["next_ab"][sel], np.stack(fn(r["next_t"][sel].astype(np.float64)), -1),
+                                   atol=1e-7)
+    assert np.any(~crossed) and np.all(r["next_t"][~crossed] == r["t"][~crossed])
+
+    _, r = ex.load(data, "cascade_dispatch")  # seed 004 eq. 4-6: each band starts at its corner
+    planted = r["case_tag"] == ex.CASES["planted"]
+    W, H, s_, n = (r[f][planted].astype(np.int64) for f in ("ccm0_x", "ccm0_y", "s", "n_levels"))
+    dy = H * (s_ - 1) // (2 * s_)
+    ring = W * H - (W // s_) * (H // s_)
+    tid = r["tid"][planted].astype(np.int64)
+    level = np.where(tid < W * H, 0, 1 + (tid - W * H) // np.maximum(ring, 1))
+    np.testing.assert_array_equal(r["level"][planted], level)
+    tx, ty = r["texel"][planted, 0], r["texel"][planted, 1]
+    assert np.all(tx == 0) and np.all((ty == 0) | (ty == dy) | (ty == H - dy))
+    total = r["ccm0_x"] * r["ccm0_y"] + (r["n_levels"] - 1) * (
+        r["ccm0_x"] * r["ccm0_y"] - (r["ccm0_x"] // r["s"]) * (r["ccm0_y"] // r["s"]))
+    np.testing.assert_array_equal(r["valid"], (r["tid"] >= 0) & (r["tid"] < total))
+
+    _, r = ex.load(data, "photon_intensity")  # seed 004 eq. 14 at normal incidence: F_refl = F_frac
+    planted = r["case_tag"] == ex.CASES["planted"]
+    np.testing.assert_allclose(r["F_refl"][planted], r["f_frac"][planted], atol=1e-6)
+    np.testing.assert_allclose(r["F_refr"], 1 - r["F_refl"].astype(np.float64), atol=1e-6)
+
+    _, r = ex.load(data, "sprite")  # eq. 16, 19, 20 at normal incidence with sigma = 1
+    planted = r["case_tag"] == ex.CASES["planted"]
+    x = {f: r[f][planted].astype(np.float64) for f in ("r_width", "r_height", "ccm0_x", "ccm0_y", "q0", "R")}
+    q = np.sqrt(x["r_width"] / (x["ccm0_x"] - 1) * x["r_height"] / (x["ccm0_y"] - 1)) * x["q0"]
+    np.testing.assert_allclose(r["q"][planted], q, rtol=1e-6)
+    np.testing.assert_allclose(r["a"][planted], 1 / (1 + 1e-3), rtol=1e-6)
+    np.testing.assert_allclose(r["I"][planted], x["R"] * (1 + 1e-3) / q**2, rtol=1e-5)
+
+    _, r = ex.load(data, "resolve_ema")  # seed 000 eq. 1-2: a steady state stays put
+    planted = r["case_tag"] == ex.CASES["planted"]
+    np.testing.assert_allclose(r["L_new"][planted], r["L_hat"][planted], rtol=1e-5)
+    np.testing.assert_allclose(r["L_o"], r["tau"].astype(np.float64) * r["I"] / np.where(
+        r["r"] > 0, np.pi * r["r"].astype(np.float64) ** 2, np.inf)[:, None], rtol=1e-6)
+
+    _, r = ex.load(data, "reuse_accepted")  # seed 000 eq. 4
+    d2 = np.sum((r["p_prev"].astype(np.float64) - r["p"]) ** 2, -1)
+    cos = np.sum(r["n_prev"].astype(np.float64) * r["n"], -1)
+    expect = (d2 <= r["r"].astype(np.float64) ** 2) & (cos >= 0.9) & (r["m_prev"] == r["m"])
+    np.testing.assert_array_equal(r["accepted"], expect)
+    assert 0 < r["accepted"].sum() < len(expect)
+
+    _, r = ex.load(data, "denoise_subpass")  # eq. 24 normalises: a constant row stays constant
+    planted = r["case_tag"] == ex.CASES["planted"]
+    np.testing.assert_allclose(r["C_out"][planted], r["C"][planted, 0], rtol=1e-6)
+
+
 def test_edge_roots_solve_the_corrected_edge_quadratics(data):
     """MATH.md §3's table, evaluated here independently: each stored root is a root."""
     _, r = ex.load(data, "edge_intersections")
@@ -316,3 +380,208 @@ def test_each_kernel_is_registered_once_with_a_real_reference_function(kernel):
         ex.register(kernel, equations="", reference=len, inputs={"x": "float"}, outputs={"y": "float"},
                     generate=k.generate)(k.evaluate)
     assert ex.KERNELS[kernel] is k
+
+
+# --------------------------------------------------------------------------- scenes
+
+SCENE_NAMES = ["wavy_gentle", "lagoon", "no_crossing"]  # a grid, a general mesh, lanes that cross nothing
+SCENE_LANES = 64
+
+
+@pytest.fixture(scope="module")
+def scene_data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("scenes")
+    ex.export(out, kernels=[], scenes=SCENE_NAMES, lanes=SCENE_LANES, seed=3)
+    return out
+
+
+def _scene_dtype(entry: dict) -> np.dtype:
+    return _read_with_numpy(entry, b"\0" * entry["stride"] * entry["count"]).dtype
+
+
+@pytest.mark.parametrize("scene", SCENE_NAMES)
+def test_scene_buffers_tile_the_file_and_read_from_the_manifest_alone(scene_data, scene):
+    m = json.loads((scene_data / f"{scene}.json").read_text())
+    raw = (scene_data / f"{scene}.bin").read_bytes()
+    assert m["scene"] == scene and m["seed"] == 3 and m["version"]["format"] == ex.FORMAT_VERSION
+    end = 0
+    mine = ex.read_scene(m, raw)
+    for name, e in m["buffers"].items():
+        assert e["offset"] % ex.BUFFER_ALIGNMENT == 0 and e["offset"] >= end, name
+        end = e["offset"] + e["count"] * e["stride"]
+        assert end <= len(raw)
+        rec = np.frombuffer(raw, _scene_dtype(e), count=e["count"], offset=e["offset"])
+        for f in e["fields"]:
+            np.testing.assert_array_equal(_logical(rec, f), mine[name][f["name"]])
+            assert np.all(np.isfinite(mine[name][f["name"]])), f"{scene}.{name}.{f['name']}"
+            if f["glsl"].startswith("vec3"):
+                assert np.all(rec[f["name"]][..., 3] == 0), "vec3 padding must be zero"
+    assert len(raw) == end
+    assert m["buffers"]["lanes"]["count"] == SCENE_LANES == mine["scene"]["n_lanes"][0]
+    assert mine["scene"]["n_faces"][0] == m["buffers"]["faces"]["count"]
+    assert mine["scene"]["n_vertices"][0] == m["buffers"]["vertices"]["count"]
+
+
+def test_scene_manifest_carries_statuses_options_and_paper_equations(scene_data):
+    from caustics_jax import Status, Walk
+
+    m = json.loads((scene_data / "wavy_gentle.json").read_text())
+    assert [(s["code"], s["name"], s["meaning"]) for s in m["status"]] == [(int(s), s.name, s.message)
+                                                                          for s in Status]
+    opt = m["options"]
+    assert opt["tol"] == pytest.approx(Walk().tolerance(np.float32), rel=1e-7) and opt["dtype"] == "float32"
+    assert opt["max_steps"] == Walk().max_steps and opt["bracket"] == "illinois"
+    assert "seed 001" in m["equations"] and "MATH.md" in m["equations"]
+    assert "caustics_jax" not in m["equations"] and ".py" not in m["equations"]
+    for key in ("status", "M", "angle", "D", "E"):
+        assert key in m["tolerance"]
+    assert 0 < m["tolerance"]["D"]["rel"] < 1e-3 and 0 < m["tolerance"]["E"]["rel"] < 1e-3
+
+
+@pytest.mark.parametrize("scene", SCENE_NAMES)
+def test_scene_surface_is_a_consistent_mesh(scene_data, scene):
+    m, b = ex.load_scene(scene_data, scene)
+    v, f, p = b["vertices"], b["faces"], b["scene"]
+    nv, nf = len(v["position"]), len(f["v"])
+    assert np.all(f["v"] < nv)
+    np.testing.assert_allclose(np.linalg.norm(v["normal"].astype(np.float64), axis=-1), 1, atol=1e-6)
+    nb, ne = f["neighbor"], f["neighbor_edge"]
+    assert np.all((nb >= -1) & (nb < nf)) and np.all((ne == -1) == (nb == -1))
+    face, k = np.nonzero(nb >= 0)  # adjacency is symmetric: the neighbour's neighbour is this face
+    g, kg = nb[face, k], ne[face, k]
+    np.testing.assert_array_equal(nb[g, kg], face)
+    np.testing.assert_array_equal(ne[g, kg], k)
+    # the shared edge has the same two vertices, in the opposite order (consistent winding)
+    np.testing.assert_array_equal(f["v"][face, k], f["v"][g, (kg + 1) % 3])
+    np.testing.assert_array_equal(f["v"][face, (k + 1) % 3], f["v"][g, kg])
+    if p["has_grid"][0]:
+        nx, ny = int(p["grid_nx"][0]), int(p["grid_ny"][0])
+        assert m["grid"]["nx"] == nx and nf == 2 * nx * ny
+        i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="xy")
+        x = np.float32(m["grid"]["x0"]) + i.ravel() * m["grid"]["dx"]
+        np.testing.assert_allclose(v["position"][:, 0], x, atol=1e-6)
+        assert p["grid_x1"][0] == np.float32(m["grid"]["x0"] + nx * m["grid"]["dx"])
+        v00 = (j[:-1, :-1] * (nx + 1) + i[:-1, :-1]).ravel()
+        np.testing.assert_array_equal(f["v"][0::2], np.stack([v00, v00 + 1, v00 + nx + 2], -1))
+    else:
+        assert m["grid"] is None and p["grid_nx"][0] == 0
+
+
+@pytest.mark.parametrize("scene", SCENE_NAMES)
+def test_scene_lanes_hold_valid_walk_results_checked_by_the_oracle(scene_data, scene):
+    """The expected lanes, judged independently: start points on the segment, FOUND points
+    refracting to within tol (float64 oracle), the float64 reference to 1e-9, zeros where
+    nothing was found."""
+    from caustics_jax import Status
+    from caustics_jax.testing import oracle
+
+    m, b = ex.load_scene(scene_data, scene)
+    lanes, v, f = b["lanes"], b["vertices"], b["faces"]
+    mesh = oracle.NumpyMesh(v["position"].astype(np.float64), f["v"].astype(np.int64),
+                            v["normal"].astype(np.float64))
+    P, L = lanes["P"].astype(np.float64), lanes["L"].astype(np.float64)
+    eta, tol = m["eta"], m["options"]["tol"]
+    started = lanes["start_found"] == 1
+    V0, _ = mesh.triangles(lanes["start_face"][started])
+    M0 = oracle.barycentric_point(V0, lanes["start_ab"][started].astype(np.float64))
+    d = L[started] - P[started]
+    s = np.sum((M0 - P[started]) * d, -1) / np.sum(d * d, -1)
+    assert np.all((s > -1e-6) & (s < 1 + 1e-6))
+    np.testing.assert_allclose(M0, P[started] + s[:, None] * d, atol=2e-5)
+    status = lanes["status"]
+    assert np.all(status[~started] == Status.NO_CROSSING) and np.all(lanes["face"][~started] == -1)
+    found = status == Status.FOUND
+    assert found.any() and set(np.unique(status)) <= {int(x) for x in Status}
+    V, _ = mesh.triangles(lanes["face"][found])
+    ab = lanes["ab"][found].astype(np.float64)
+    np.testing.assert_allclose(lanes["M"][found], oracle.barycentric_point(V, ab), atol=2e-6)
+    angle = oracle.refraction_angle_error(mesh, lanes["face"][found], ab, P[found], L[found], eta)
+    bound = oracle.refraction_rounding_bound(mesh, lanes["face"][found], ab, P[found], eta, np.float32)
+    assert np.all(angle <= tol + 4 * bound), angle.max()
+    assert np.all(np.abs(lanes["residual"][found]) <= tol)
+    for name in ("D", "E", "D_valid"):
+        assert np.all(lanes[name][~found] == 0), name
+    assert np.all(lanes["E"] >= 0) and np.all(lanes["D"][lanes["D_valid"] == 1] > 0)
+    ref = lanes["status_ref"] == Status.FOUND
+    M_ref = lanes["M_ref"].astype(np.float64) + lanes["M_ref_lo"].astype(np.float64)
+    Vr, _ = mesh.triangles(lanes["face_ref"][ref])
+    np.testing.assert_allclose(M_ref[ref], oracle.barycentric_point(Vr, lanes["ab_ref"][ref].astype(np.float64)),
+                               atol=1e-6)
+    assert np.all(lanes["angle_error"][ref] <= 1e-9)
+    both = found & ref
+    dist = np.linalg.norm(lanes["M"][both] - M_ref[both], axis=-1)
+    assert np.all(dist <= lanes["M_tol"][both]), "the float32 point lies within M_tol of the float64 one"
+    assert np.all(lanes["conditioned"] <= 1) and lanes["conditioned"].sum() > 0.9 * SCENE_LANES
+
+
+def test_no_crossing_scene_has_lanes_that_cross_nothing(scene_data):
+    from caustics_jax import Status
+
+    m, b = ex.load_scene(scene_data, "no_crossing")
+    lanes = b["lanes"]
+    adversarial = lanes["case_tag"] == ex.CASES["adversarial"]
+    assert adversarial.sum() == m["cases"]["adversarial"]["count"] > SCENE_LANES // 2
+    assert np.all(lanes["status"][adversarial] == Status.NO_CROSSING)
+    assert np.all(lanes["start_found"][adversarial] == 0)
+
+
+def test_scene_same_seed_same_bytes(tmp_path):
+    for name, seed in (("a", 1), ("b", 1), ("c", 2)):
+        ex.export(tmp_path / name, kernels=[], scenes=["flat_pool"], lanes=8, seed=seed)
+    for f in ("flat_pool.bin", "flat_pool.json", "caustics_scene.h"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    assert (tmp_path / "a" / "flat_pool.bin").read_bytes() != (tmp_path / "c" / "flat_pool.bin").read_bytes()
+
+
+def test_scene_c_header_declares_the_buffers_and_reads_the_lanes(scene_data, tmp_path):
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    m, b = ex.load_scene(scene_data, "lagoon")
+    lanes = m["buffers"]["lanes"]
+    prog = tmp_path / "read.c"
+    prog.write_text(f"""
+#include <stdio.h>
+#include "{scene_data / 'caustics_scene.h'}"
+int main(void) {{
+    FILE *f = fopen("{scene_data / 'lagoon.bin'}", "rb");
+    cj_scene_params params;
+    fseek(f, {m['buffers']['scene']['offset']}, SEEK_SET);
+    if (fread(&params, sizeof params, 1, f) != 1) return 1;
+    fseek(f, {lanes['offset']}, SEEK_SET);
+    cj_scene_lane lane;
+    unsigned found = 0;
+    double sum = 0;
+    for (unsigned i = 0; i < params.n_lanes; ++i) {{
+        if (fread(&lane, sizeof lane, 1, f) != 1) return 1;
+        found += lane.status == 0;
+        sum += lane.M[0] + lane.P[2];
+    }}
+    printf("%u %u %u %.9g\\n", params.n_faces, params.n_lanes, found, sum);
+    return 0;
+}}
+""")
+    exe = tmp_path / "read"
+    subprocess.run([cc, "-std=c11", "-Wall", "-Werror", "-o", str(exe), str(prog)], check=True)
+    n_faces, n_lanes, found, total = subprocess.run([str(exe)], capture_output=True, text=True,
+                                                    check=True).stdout.split()
+    assert int(n_faces) == m["buffers"]["faces"]["count"] and int(n_lanes) == lanes["count"]
+    assert int(found) == np.sum(b["lanes"]["status"] == 0)
+    expect = b["lanes"]["M"][:, 0].astype(np.float64).sum() + b["lanes"]["P"][:, 2].astype(np.float64).sum()
+    assert float(total) == pytest.approx(expect, rel=1e-6)
+
+
+def test_bad_scene_arguments_raise_before_any_work(tmp_path, capsys, monkeypatch):
+    def no_work(*args, **kwargs):
+        raise AssertionError("export started working")
+
+    monkeypatch.setattr(ex.scene_writer, "export_scene", no_work)
+    with pytest.raises(ValueError, match="unknown scene"):
+        ex.export(tmp_path, kernels=[], scenes=["atlantis"])
+    for lanes in (0, 2**21, 1.5, True):
+        with pytest.raises(ValueError, match="lanes"):
+            ex.export(tmp_path, kernels=[], scenes=["flat_pool"], lanes=lanes)
+    assert cli.main(["export", "--out", str(tmp_path), "--scenes", "nope"]) == 2
+    assert "unknown scene" in capsys.readouterr().err
+    assert cli.main(["export", "--out", str(tmp_path), "--scenes", "flat_pool", "--lanes", "0"]) == 2
+    assert "lanes" in capsys.readouterr().err

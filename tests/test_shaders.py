@@ -1,5 +1,6 @@
 """GLSL conformance on a Vulkan device (lavapipe in CI): every kernel's port reproduces the
-exported reference within the manifest tolerances, and a wrong line makes it fail.
+exported reference within the manifest tolerances, the start point, walk, D and irradiance
+pass on every exported scene, and a wrong line makes either fail.
 
 Skips, saying what is missing, where glslangValidator, a C compiler, the Vulkan headers
 and loader or a Vulkan device are absent (`.ci/run` installs them on Debian).
@@ -11,6 +12,11 @@ import pytest
 
 from caustics_jax import export as ex
 from caustics_jax.shaders import conformance as conf
+from caustics_jax.shaders import scene_conformance as sc
+from caustics_jax.shaders import vulkan as vk
+
+#: Lanes per exported scene in the tests (`make conformance` exports 4096).
+SCENE_LANES = 256
 
 # The line of edge_intersections.glsl for edge a = 0 and its misprint in seed 001 eq. 22.
 CORRECT_EDGE_LINE = "quad[2] = vec3(B, E, F);"
@@ -23,7 +29,7 @@ def device(tmp_path_factory):
     work = tmp_path_factory.mktemp("vk")
     data = tmp_path_factory.mktemp("refdata")
     try:
-        conf._which("glslangValidator")
+        vk.which("glslangValidator")
         host = conf.build_host(work)
         ex.export(data, kernels=["fresnel"], count=8, seed=1)
         conf.run_kernel(data, "fresnel", work, host=host)  # probes the device
@@ -47,7 +53,7 @@ def test_misprinted_edge_quadratic_fails_conformance(device, tmp_path):
     data, work, host = device
     shaders = tmp_path / "shaders"
     shutil.copytree(conf.SHADER_DIR, shaders, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
-    path = shaders / "edge_intersections.glsl"
+    path = shaders / "common.glsl"  # cj_edge_intersections, shared by the kernel and the walk
     text = path.read_text()
     assert text.count(CORRECT_EDGE_LINE) == 1
     path.write_text(text.replace(CORRECT_EDGE_LINE, MISPRINTED_EDGE_LINE))
@@ -85,3 +91,75 @@ def test_other_plausible_wrong_lines_fail_conformance(device, kernel, line, wron
     assert source.count(line) == 1
     report = conf.run_kernel(data, kernel, work, host=host, source=source.replace(line, wrong))
     assert report["pass_rate"] < 1.0
+
+
+@pytest.fixture(scope="module")
+def scenes(device, tmp_path_factory):
+    """`(data_dir, work_dir, host, spv)`: every scene exported, the scene shader compiled once."""
+    _, work, host = device
+    data = tmp_path_factory.mktemp("scenes")
+    ex.export(data, kernels=[], scenes=list(ex.SCENES), lanes=SCENE_LANES, seed=5)
+    spv = conf.compile_shader(sc.scene_shader_source(), work / "scene.spv")
+    return data, work, host, spv
+
+
+@pytest.mark.parametrize("scene", list(ex.SCENES))
+def test_glsl_walk_conforms_on_every_scene(scenes, scene):
+    """Start point, walk, D and irradiance: stable-lane status agreement >= 99.9%, points
+    within M_tol where both are FOUND, no FOUND point off by more than tol (float64 check),
+    D and E at the port's own points within their tolerances."""
+    data, work, host, spv = scenes
+    r = sc.run_scene(data, scene, work, host=host, spv=spv)
+    assert r["lanes"] == SCENE_LANES and r["device"]
+    assert r["silent_wrong"] == 0, f"{scene}: lanes {r['silent_lanes']} FOUND with an angle error above tol"
+    assert r["M_outside_tol"] == 0, f"{scene}: lanes {r['M_outside_lanes']} FOUND at another point"
+    assert r["D"]["violations"] == 0 and r["E"]["violations"] == 0, (r["D"], r["E"])
+    assert r["status_agreement"] >= 0.999, (scene, r["disagreements"], r["disagreeing_lanes"])
+    assert r["passed"]
+    if scene != "stress_p_near_surface":  # P within a micrometre of the surface: nothing is found
+        assert r["found_port"] > 0
+
+
+@pytest.mark.parametrize("file, line, wrong", [
+    # an edge index: the neighbour across the next edge
+    ("common.glsl", "int g = valid_face ? neighbor[k] : -1;", "int g = valid_face ? neighbor[(k + 1) % 3] : -1;"),
+    # the shared edge runs the other way in the neighbour: forgetting it
+    ("common.glsl", "cj_edge_param_from_vertex_order(max(k_next, 0), 1.0 - s);",
+     "cj_edge_param_from_vertex_order(max(k_next, 0), s);"),
+    # a sign: the tangent oriented outward at the entry point
+    ("walk.glsl", "cj_orientation(fr.coef, e, side < 0.0 ? -t : t, tau, perp);",
+     "cj_orientation(fr.coef, e, side > 0.0 ? -t : t, tau, perp);"),
+    # the bracket end the cut replaces
+    ("walk.glsl", "bool to_hi = cj_opposite(fm, s.f_lo);", "bool to_hi = cj_opposite(fm, s.f_hi);"),
+    # the grid's cell index transposed
+    ("start_point.glsl", "int f0 = 2 * (ij.y * n_cells.x + ij.x);", "int f0 = 2 * (ij.x * n_cells.y + ij.y);"),
+    # the Fresnel transmittance seen from the water side
+    ("common.glsl", "cj_fresnel_reflectance(dot(w_L, n_s), 1.0 / eta)", "cj_fresnel_reflectance(dot(w_L, n_s), eta)"),
+])
+def test_a_broken_line_of_the_glsl_walk_fails_conformance(scenes, tmp_path, file, line, wrong):
+    data, work, host, _ = scenes
+    shaders = tmp_path / "shaders"
+    shutil.copytree(conf.SHADER_DIR, shaders, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+    path = shaders / file
+    text = path.read_text()
+    assert text.count(line) == 1, line
+    path.write_text(text.replace(line, wrong))
+    spv = conf.compile_shader(sc.scene_shader_source(shaders), tmp_path / "broken.spv")
+    reports = [sc.run_scene(data, s, tmp_path / s, host=host, spv=spv) for s in ("wavy_steep", "lagoon")]
+    assert not all(r["passed"] for r in reports), [(r["scene"], r["status_agreement"]) for r in reports]
+
+
+def test_a_scene_shader_that_echoes_its_input_cannot_pass(scenes):
+    """Outputs and the reference are hidden before upload: copying the lane does not pass."""
+    data, work, host, _ = scenes
+    source = sc.scene_shader_source().replace("void main() {", "void main_unused() {")
+    source += "void main() { uint i = gl_GlobalInvocationID.x; if (i < push.count) lanes_out[i] = lanes_in[i]; }\n"
+    r = sc.run_scene(data, "wavy_gentle", work, host=host, source=source)
+    assert not r["passed"] and r["status_agreement"] == 0.0
+
+
+def test_scene_table_lists_every_scene(scenes):
+    data, work, host, spv = scenes
+    reports = [sc.run_scene(data, s, work, host=host, spv=spv) for s in ("flat_pool", "no_crossing")]
+    table = sc.format_scene_table(reports)
+    assert "| flat_pool |" in table and "| no_crossing |" in table

@@ -167,22 +167,28 @@ def c_header(kernels) -> str:
              "#ifndef CAUSTICS_RECORDS_H", "#define CAUSTICS_RECORDS_H", "#include <stddef.h>",
              "#include <stdint.h>", f"#define CAUSTICS_RECORDS_VERSION {FORMAT_VERSION}", ""]
     for k in kernels:
-        offsets, stride = layout(k.fields)
-        sname = f"cj_{k.name}_record"
-        lines.append(f"/* {k.name}: {k.equations} */")
-        lines.append(f"typedef struct {sname} {{")
-        end = 0
-        for f, off in zip(k.fields, offsets, strict=True):
-            if off > end:  # std430 alignment gap (vec2 on 8, vec3/vec4 on 16 bytes)
-                lines.append(f"    uint8_t _pad_{f.name}[{off - end}];")
-            lines.append(_c_field(f, off))
-            end = off + f.size
-        if stride > end:
-            lines.append(f"    uint8_t _pad_end[{stride - end}];")
-        lines.append(f"}} {sname};")
-        lines.append(f"_Static_assert(sizeof({sname}) == {stride}, \"{k.name} stride\");")
-        lines += [f"_Static_assert(offsetof({sname}, {f.name}) == {off}, \"{k.name}.{f.name}\");"
-                  for f, off in zip(k.fields, offsets, strict=True)]
-        lines.append("")
+        lines += c_struct(f"cj_{k.name}_record", k.name, k.equations, k.fields)
     lines.append("#endif")
     return "\n".join(lines) + "\n"
+
+
+def c_struct(sname: str, label: str, comment: str, fields) -> list[str]:
+    """Lines of one C11 struct `sname` laid out like the std430 record of `fields` (explicit
+    padding members), with static asserts on its size and every offset, and a blank line."""
+    fields = _fields(fields)
+    offsets, stride = layout(fields)
+    lines = [f"/* {label}: {comment} */", f"typedef struct {sname} {{"]
+    end = 0
+    for f, off in zip(fields, offsets, strict=True):
+        if off > end:  # std430 alignment gap (vec2 on 8, vec3/vec4 on 16 bytes)
+            lines.append(f"    uint8_t _pad_{f.name}[{off - end}];")
+        lines.append(_c_field(f, off))
+        end = off + f.size
+    if stride > end:
+        lines.append(f"    uint8_t _pad_end[{stride - end}];")
+    lines.append(f"}} {sname};")
+    lines.append(f"_Static_assert(sizeof({sname}) == {stride}, \"{label} stride\");")
+    lines += [f"_Static_assert(offsetof({sname}, {f.name}) == {off}, \"{label}.{f.name}\");"
+              for f, off in zip(fields, offsets, strict=True)]
+    lines.append("")
+    return lines

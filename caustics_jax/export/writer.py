@@ -109,31 +109,48 @@ def _check_out_dir(out: Path) -> None:
         raise ValueError(f"--out {out} is not writable: {exc.strerror or exc}") from None
 
 
-def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0) -> list[Path]:
-    """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h` into `out_dir`.
+def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0,
+           scenes: list[str] | None = (), lanes: int = 256) -> list[Path]:
+    """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h`, and
+    `<scene>.json`, `<scene>.bin` per scene and `caustics_scene.h`, into `out_dir`.
 
-    `count` random and planted records per kernel (a quarter planted), plus each kernel's
-    fixed adversarial cases. Same arguments, same bytes. Raises ValueError, before any
-    work, on unknown kernel names, a count below 4, a negative seed, or an `out_dir` that
-    is a file, lies below a file or cannot be created or written.
+    `kernels`: names of `KERNELS` (None: all; empty: none). `count` random and planted
+    records per kernel (a quarter planted), plus each kernel's fixed adversarial cases.
+    `scenes`: names of `SCENES` (None: all; default none), each with `lanes` lanes
+    (`scene_writer.export_scene`). Same arguments, same bytes. Raises ValueError, before
+    any work, on unknown kernel or scene names, a count below 4, lanes outside
+    [1, 2^20], a negative seed, or an `out_dir` that is a file, lies below a file or
+    cannot be created or written.
     """
-    names = list(KERNELS) if not kernels else list(kernels)
+    from .scene_registry import SCENES
+    from .scene_writer import write_scenes
+
+    names = list(KERNELS) if kernels is None else list(kernels)
     unknown = [k for k in names if k not in KERNELS]
     if unknown:
         raise ValueError(f"unknown kernel(s) {unknown}; choose from {sorted(KERNELS)}")
+    scene_names = list(SCENES) if scenes is None else list(scenes)
+    unknown = [s for s in scene_names if s not in SCENES]
+    if unknown:
+        raise ValueError(f"unknown scene(s) {unknown}; choose from {sorted(SCENES)}")
     if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 4:
         raise ValueError(f"count must be an integer >= 4, got {count!r}")
+    if isinstance(lanes, bool) or not isinstance(lanes, int | np.integer) or not 1 <= lanes <= 2**20:
+        raise ValueError(f"lanes must be an integer in [1, 2^20], got {lanes!r}")
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     out = Path(out_dir)
     _check_out_dir(out)
-    audit = load_audit()
     written = []
-    for name in progress(names, desc="export", unit="kernel"):
-        manifest, raw = export_kernel(KERNELS[name], int(count), int(seed), audit)
-        (out / f"{name}.json").write_text(json.dumps(manifest, indent=1) + "\n")
-        (out / f"{name}.bin").write_bytes(raw)
-        written += [out / f"{name}.json", out / f"{name}.bin"]
-    (out / "caustics_records.h").write_text(c_header([KERNELS[n] for n in names]))
-    written.append(out / "caustics_records.h")
+    if names:
+        audit = load_audit()
+        for name in progress(names, desc="export", unit="kernel"):
+            manifest, raw = export_kernel(KERNELS[name], int(count), int(seed), audit)
+            (out / f"{name}.json").write_text(json.dumps(manifest, indent=1) + "\n")
+            (out / f"{name}.bin").write_bytes(raw)
+            written += [out / f"{name}.json", out / f"{name}.bin"]
+        (out / "caustics_records.h").write_text(c_header([KERNELS[n] for n in names]))
+        written.append(out / "caustics_records.h")
+    if scene_names:
+        written += write_scenes(out, scene_names, int(lanes), int(seed))
     return written

@@ -8,7 +8,9 @@ Vulkan loader) on the records with their outputs overwritten by NaN; read the re
 and compare the outputs with the reference (`export.compare`: max abs / rel / ULP error and
 pass rate against the manifest tolerances).
 
-    python -m caustics_jax.shaders.conformance DATA_DIR [--kernels ...] [--json out.json]
+    python -m caustics_jax.shaders.conformance DATA_DIR [--kernels ...] [--scenes ...] [--json out.json]
+
+Scenes (start point, walk, D, irradiance) are judged by `scene_conformance`.
 
 Needs `glslangValidator` (Debian `glslang-tools`), a C compiler, the Vulkan headers and
 loader (`libvulkan-dev`, `libvulkan1`) and a Vulkan driver (`mesa-vulkan-drivers` gives
@@ -18,11 +20,7 @@ lavapipe on the CPU). Where one is missing, `Unavailable` says which.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
-import os
-import shutil
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -30,24 +28,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import export as ex
-
-SHADER_DIR = Path(__file__).resolve().parent
-LOCAL_SIZE = 64  # host.c dispatches ceil(count / 64) workgroups
-
-
-class Unavailable(RuntimeError):
-    """The toolchain or the Vulkan device needed for a conformance run is missing."""
-
-
-def glsl_struct(kernel: ex.Kernel) -> str:
-    """GLSL `struct Record` matching the std430 layout of `export.layout` (vec3 + explicit pad)."""
-    lines = ["struct Record {"]
-    for f in kernel.fields:
-        lines.append(f"    {f.glsl} {f.name}{f'[{f.length}]' if f.length else ''};")
-        if f.glsl == "vec3" and not f.length:
-            lines.append(f"    float _pad_{f.name};  // vec3 padded to 16 bytes")
-    lines.append("};")
-    return "\n".join(lines)
+from .vulkan import (
+    LOCAL_SIZE,
+    SHADER_DIR,
+    Unavailable,
+    build_host,
+    compile_shader,
+    glsl_struct,
+    run_host,
+)
 
 
 def shader_source(kernel_name: str, shader_dir: Path | None = None) -> str:
@@ -77,46 +66,6 @@ def shader_source(kernel_name: str, shader_dir: Path | None = None) -> str:
     ])
 
 
-def _which(tool: str) -> str:
-    path = shutil.which(tool)
-    if path is None:
-        raise Unavailable(f"{tool} not found on PATH")
-    return path
-
-
-def build_host(cache_dir: Path) -> Path:
-    """Compile host.c (once per source version) into `cache_dir`; Unavailable if it cannot."""
-    src = SHADER_DIR / "host.c"
-    digest = hashlib.sha256(src.read_bytes()).hexdigest()[:12]
-    exe = Path(cache_dir) / f"cj_vk_host_{digest}"
-    if exe.exists():
-        return exe
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        raise Unavailable("no C compiler (cc) to build the Vulkan host")
-    Path(cache_dir).mkdir(parents=True, exist_ok=True)
-    tmp = exe.with_suffix(".tmp")
-    proc = subprocess.run([cc, "-O2", "-std=c11", "-o", str(tmp), str(src), "-lvulkan"],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        hint = " (install libvulkan-dev)" if "vulkan" in proc.stderr else ""
-        raise Unavailable(f"cannot build the Vulkan host{hint}: {proc.stderr.strip()[:400]}")
-    tmp.replace(exe)
-    return exe
-
-
-def compile_shader(source: str, out: Path) -> Path:
-    """glslangValidator -V (Vulkan 1.0 SPIR-V); raises RuntimeError with its log on errors."""
-    glslang = _which("glslangValidator")
-    comp = out.with_suffix(".comp")
-    comp.write_text(source)
-    proc = subprocess.run([glslang, "-V", "--target-env", "vulkan1.0", "-o", str(out), str(comp)],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"glslangValidator failed on {comp}:\n{proc.stdout}{proc.stderr}")
-    return out
-
-
 def _hide_outputs(manifest: dict, raw: bytes) -> bytes:
     """The records with every output field's bytes set to 0xFF (NaN / 0xFFFFFFFF): a shader
     that forgets to write an output cannot pass by echoing the reference."""
@@ -142,15 +91,10 @@ def run_kernel(data_dir, kernel_name: str, work_dir, *, source: str | None = Non
     raw = (Path(data_dir) / f"{kernel_name}.bin").read_bytes()
     (work / f"{kernel_name}.in.bin").write_bytes(_hide_outputs(manifest, raw))
     out = work / f"{kernel_name}.out.bin"
-    proc = subprocess.run([str(host), str(spv), str(work / f"{kernel_name}.in.bin"), str(out),
-                           str(manifest["count"]), str(manifest["stride"])], capture_output=True, text=True)
-    if proc.returncode == 3:
-        raise Unavailable(f"no Vulkan device: {proc.stderr.strip()}")
-    if proc.returncode != 0:
-        raise RuntimeError(f"Vulkan host failed ({proc.returncode}): {proc.stderr.strip()}")
+    device, seconds = run_host(host, spv, work / f"{kernel_name}.in.bin", out, manifest["count"], manifest["stride"])
     got = ex.read_records(manifest, out.read_bytes())
     report = ex.compare(manifest, records, got)
-    report["device"] = proc.stdout.strip()
+    report["device"], report["dispatch_seconds"] = device, seconds
     return report
 
 
@@ -182,24 +126,38 @@ def format_table(reports: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
+    from . import scene_conformance as sc
+
     p = argparse.ArgumentParser(prog="python -m caustics_jax.shaders.conformance", description=__doc__.splitlines()[0])
     p.add_argument("data", help="directory written by `caustics-jax export`")
     p.add_argument("--kernels", nargs="+", default=None, choices=sorted(ex.KERNELS))
+    p.add_argument("--scenes", nargs="+", default=None, choices=sorted(ex.SCENES))
     p.add_argument("--json", default=None, help="write the reports as JSON here")
     args = p.parse_args(argv)
+    data = Path(args.data)
+    kernels = args.kernels if args.kernels or args.scenes else [k for k in ex.KERNELS if (data / f"{k}.json").exists()]
+    scenes = args.scenes if args.scenes or args.kernels else [s for s in ex.SCENES if (data / f"{s}.json").exists()]
+    if not kernels and not scenes:
+        print(f"conformance: no exported kernels or scenes in {data}", file=sys.stderr)
+        return 2
     try:
-        reports = run_conformance(args.data, args.kernels)
+        reports = run_conformance(data, kernels) if kernels else []
+        scene_reports = sc.run_scenes(data, scenes) if scenes else []
     except Unavailable as exc:
         print(f"conformance: skipped, {exc}", file=sys.stderr)
         return 3
     except ValueError as exc:
         print(f"conformance: {exc}", file=sys.stderr)
         return 2
-    print(f"device: {reports[0]['device']}")
-    print(format_table(reports))
+    print(f"device: {(reports or scene_reports)[0]['device']}")
+    if reports:
+        print(format_table(reports))
+    if scene_reports:
+        print(sc.format_scene_table(scene_reports))
     if args.json:
-        Path(args.json).write_text(json.dumps(reports, indent=1) + "\n")
-    failed = [r["kernel"] for r in reports if r["pass_rate"] < 1]
+        Path(args.json).write_text(json.dumps({"kernels": reports, "scenes": scene_reports}, indent=1) + "\n")
+    failed = [r["kernel"] for r in reports if r["pass_rate"] < 1] + [r["scene"] for r in scene_reports
+                                                                     if not r["passed"]]
     if failed:
         print(f"FAILED: {failed}", file=sys.stderr)
     return 1 if failed else 0

@@ -1,23 +1,30 @@
 /* Minimal Vulkan compute host for the conformance harness (caustics_jax/conformance.py).
  *
- *   cj_vk_host SHADER.spv IN.bin OUT.bin COUNT STRIDE
+ *   cj_vk_host SHADER.spv IN.bin OUT.bin COUNT STRIDE [EXTRA.bin ...]
  *
  * Runs the compute shader once over COUNT records: binding 0 is a storage buffer holding
  * IN.bin (the exported std430 records), binding 1 a storage buffer of COUNT * STRIDE
- * bytes the shader writes its records into, push constant 0 the record count. Writes
- * binding 1 to OUT.bin and the device name to stdout. Exit status 3 means "no Vulkan
- * device" (the harness skips), any other non-zero status an error.
+ * bytes the shader writes its records into, push constant 0 the record count, and each
+ * EXTRA.bin a read-only storage buffer at binding 2, 3, ... (a scene's parameters,
+ * vertices and faces). Writes binding 1 to OUT.bin; prints the device name and then
+ * "dispatch_seconds MIN MEDIAN" (wall time of submit + wait, CJ_VK_REPEAT=n dispatches,
+ * default 1) to stdout. Exit status 3 means "no Vulkan device" (the harness skips), any
+ * other non-zero status an error.
  *
  * Host-visible, host-coherent memory only: on lavapipe all memory is, and for a test
  * harness the staging copy of a discrete GPU is not worth its code.
  */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime under -std=c11 */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <vulkan/vulkan.h>
 
 #define LOCAL_SIZE 64u
+#define MAX_BUFFERS 8
+#define MAX_REPEAT 64
 
 static int fail(const char *what, VkResult r) {
     fprintf(stderr, "cj_vk_host: %s failed (VkResult %d)\n", what, (int)r);
@@ -79,10 +86,24 @@ static int make_buffer(VkPhysicalDevice phys, VkDevice dev, VkDeviceSize size, V
 }
 
 int main(int argc, char **argv) {
-    if (argc != 6) {
-        fprintf(stderr, "usage: %s SHADER.spv IN.bin OUT.bin COUNT STRIDE\n", argv[0]);
+    if (argc < 6 || argc > 6 + MAX_BUFFERS - 2) {
+        fprintf(stderr, "usage: %s SHADER.spv IN.bin OUT.bin COUNT STRIDE [EXTRA.bin ...] (at most %d extra)\n",
+                argv[0], MAX_BUFFERS - 2);
         return 2;
     }
+    int n_bufs = argc - 4; /* in, out, extras */
+    void *extra[MAX_BUFFERS];
+    size_t extra_size[MAX_BUFFERS];
+    for (int i = 2; i < n_bufs; ++i) {
+        extra[i] = read_file(argv[4 + i], &extra_size[i]);
+        if (!extra[i]) {
+            fprintf(stderr, "cj_vk_host: cannot read %s\n", argv[4 + i]);
+            return 2;
+        }
+    }
+    int repeat = getenv("CJ_VK_REPEAT") ? atoi(getenv("CJ_VK_REPEAT")) : 1;
+    if (repeat < 1) repeat = 1;
+    if (repeat > MAX_REPEAT) repeat = MAX_REPEAT;
     uint32_t count = (uint32_t)strtoul(argv[4], NULL, 10);
     VkDeviceSize stride = (VkDeviceSize)strtoull(argv[5], NULL, 10);
     size_t spv_size = 0, in_size = 0;
@@ -158,10 +179,12 @@ int main(int argc, char **argv) {
     VkQueue queue;
     vkGetDeviceQueue(dev, family, 0, &queue);
 
-    VkBuffer bufs[2];
-    VkDeviceMemory mems[2];
-    for (int i = 0; i < 2; ++i)
-        if (make_buffer(phys, dev, out_size, &bufs[i], &mems[i])) return 1;
+    VkBuffer bufs[MAX_BUFFERS];
+    VkDeviceMemory mems[MAX_BUFFERS];
+    for (int i = 0; i < n_bufs; ++i) {
+        VkDeviceSize size = i < 2 ? out_size : (extra_size[i] > 0 ? (VkDeviceSize)extra_size[i] : 4);
+        if (make_buffer(phys, dev, size, &bufs[i], &mems[i])) return 1;
+    }
     void *ptr;
     CHECK(vkMapMemory(dev, mems[0], 0, out_size, 0, &ptr), "vkMapMemory");
     memcpy(ptr, in, in_size);
@@ -169,6 +192,12 @@ int main(int argc, char **argv) {
     CHECK(vkMapMemory(dev, mems[1], 0, out_size, 0, &ptr), "vkMapMemory");
     memset(ptr, 0xFF, out_size); /* NaN everywhere: a field the shader forgets cannot pass */
     vkUnmapMemory(dev, mems[1]);
+    for (int i = 2; i < n_bufs; ++i) {
+        if (extra_size[i] == 0) continue;
+        CHECK(vkMapMemory(dev, mems[i], 0, extra_size[i], 0, &ptr), "vkMapMemory");
+        memcpy(ptr, extra[i], extra_size[i]);
+        vkUnmapMemory(dev, mems[i]);
+    }
 
     VkShaderModuleCreateInfo smi = {VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
     smi.codeSize = spv_size;
@@ -176,12 +205,14 @@ int main(int argc, char **argv) {
     VkShaderModule module;
     CHECK(vkCreateShaderModule(dev, &smi, NULL, &module), "vkCreateShaderModule");
 
-    VkDescriptorSetLayoutBinding binds[2] = {
-        {0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL},
-        {1, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL},
-    };
+    VkDescriptorSetLayoutBinding binds[MAX_BUFFERS];
+    for (int i = 0; i < n_bufs; ++i) {
+        VkDescriptorSetLayoutBinding b = {(uint32_t)i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
+                                          VK_SHADER_STAGE_COMPUTE_BIT, NULL};
+        binds[i] = b;
+    }
     VkDescriptorSetLayoutCreateInfo dli = {VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
-    dli.bindingCount = 2;
+    dli.bindingCount = (uint32_t)n_bufs;
     dli.pBindings = binds;
     VkDescriptorSetLayout dsl;
     CHECK(vkCreateDescriptorSetLayout(dev, &dli, NULL, &dsl), "vkCreateDescriptorSetLayout");
@@ -202,7 +233,7 @@ int main(int argc, char **argv) {
     VkPipeline pipeline;
     CHECK(vkCreateComputePipelines(dev, VK_NULL_HANDLE, 1, &cpi, NULL, &pipeline), "vkCreateComputePipelines");
 
-    VkDescriptorPoolSize ps = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2};
+    VkDescriptorPoolSize ps = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (uint32_t)n_bufs};
     VkDescriptorPoolCreateInfo dpi = {VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     dpi.maxSets = 1;
     dpi.poolSizeCount = 1;
@@ -215,9 +246,12 @@ int main(int argc, char **argv) {
     dsai.pSetLayouts = &dsl;
     VkDescriptorSet set;
     CHECK(vkAllocateDescriptorSets(dev, &dsai, &set), "vkAllocateDescriptorSets");
-    VkDescriptorBufferInfo dbi[2] = {{bufs[0], 0, VK_WHOLE_SIZE}, {bufs[1], 0, VK_WHOLE_SIZE}};
-    VkWriteDescriptorSet w[2];
-    for (int i = 0; i < 2; ++i) {
+    VkDescriptorBufferInfo dbi[MAX_BUFFERS];
+    VkWriteDescriptorSet w[MAX_BUFFERS];
+    for (int i = 0; i < n_bufs; ++i) {
+        dbi[i].buffer = bufs[i];
+        dbi[i].offset = 0;
+        dbi[i].range = VK_WHOLE_SIZE;
         memset(&w[i], 0, sizeof w[i]);
         w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
         w[i].dstSet = set;
@@ -226,7 +260,7 @@ int main(int argc, char **argv) {
         w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
         w[i].pBufferInfo = &dbi[i];
     }
-    vkUpdateDescriptorSets(dev, 2, w, 0, NULL);
+    vkUpdateDescriptorSets(dev, (uint32_t)n_bufs, w, 0, NULL);
 
     VkCommandPoolCreateInfo cpci = {VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
     cpci.queueFamilyIndex = family;
@@ -257,8 +291,22 @@ int main(int argc, char **argv) {
     VkFenceCreateInfo fci = {VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
     VkFence fence;
     CHECK(vkCreateFence(dev, &fci, NULL, &fence), "vkCreateFence");
-    CHECK(vkQueueSubmit(queue, 1, &si, fence), "vkQueueSubmit");
-    CHECK(vkWaitForFences(dev, 1, &fence, VK_TRUE, 60ull * 1000000000ull), "vkWaitForFences");
+    double seconds[MAX_REPEAT];
+    for (int r = 0; r < repeat; ++r) {
+        struct timespec t0, t1;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        CHECK(vkQueueSubmit(queue, 1, &si, fence), "vkQueueSubmit");
+        CHECK(vkWaitForFences(dev, 1, &fence, VK_TRUE, 600ull * 1000000000ull), "vkWaitForFences");
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        seconds[r] = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+        CHECK(vkResetFences(dev, 1, &fence), "vkResetFences");
+    }
+    for (int a = 1; a < repeat; ++a) /* insertion sort: min and median */
+        for (int b = a; b > 0 && seconds[b] < seconds[b - 1]; --b) {
+            double tmp = seconds[b];
+            seconds[b] = seconds[b - 1];
+            seconds[b - 1] = tmp;
+        }
 
     CHECK(vkMapMemory(dev, mems[1], 0, out_size, 0, &ptr), "vkMapMemory");
     FILE *out = fopen(argv[3], "wb");
@@ -268,7 +316,7 @@ int main(int argc, char **argv) {
     }
     fclose(out);
     vkUnmapMemory(dev, mems[1]);
-    printf("%s\n", props.deviceName);
+    printf("%s\ndispatch_seconds %.9f %.9f\n", props.deviceName, seconds[0], seconds[repeat / 2]);
 
     vkDestroyFence(dev, fence, NULL);
     vkDestroyCommandPool(dev, cmd_pool, NULL);
@@ -277,10 +325,11 @@ int main(int argc, char **argv) {
     vkDestroyPipelineLayout(dev, layout, NULL);
     vkDestroyDescriptorSetLayout(dev, dsl, NULL);
     vkDestroyShaderModule(dev, module, NULL);
-    for (int i = 0; i < 2; ++i) {
+    for (int i = 0; i < n_bufs; ++i) {
         vkDestroyBuffer(dev, bufs[i], NULL);
         vkFreeMemory(dev, mems[i], NULL);
     }
+    for (int i = 2; i < n_bufs; ++i) free(extra[i]);
     vkDestroyDevice(dev, NULL);
     vkDestroyInstance(inst, NULL);
     free(spv);

@@ -1,0 +1,293 @@
+"""Writing a scene file: surface, lanes, the float32 walk's per-lane results and the float64
+reference (DESIGN.md "Reference data for shader tests"; docs/export.md "Scenes").
+
+`export_scene(spec, lanes, seed)` builds the scene (`scene_registry.SceneData`), rounds the
+surface and lanes to float32 once, and on exactly those values runs
+
+- the start point and the curve walk in float32 (`solve(..., method=Walk(), features=None)`:
+  the general walk, no closed form, as a shader runs it; seed 001 §3.4), then `D` (seed 001
+  eq. 26-33) and the irradiance (eq. 25, MATH.md §6) at its point: the `output` fields a
+  port must reproduce;
+- the same walk in float64 on the float32 values cast exactly to float64: the `reference`
+  fields (`M_ref` + `M_ref_lo` is the float64 point in two float32 parts), and the
+  refraction-angle error of that point (`testing.oracle.refraction_angle_error`);
+- per lane, the distance along the curve within which two points that both satisfy the
+  acceptance test `|f| <= tol` can lie (`M_tol`, from `df/ds` at the float32 point,
+  evaluated in float64), and per scene the measured float32 error of `D` and `E` at the
+  float32 point (float32 against float64, same point): the tolerances of conformance.
+
+Same arguments, same bytes (the tolerance digits are measured on the exporting machine).
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._precision import precision
+from ..arcs import project_to_conic
+from ..conic import conic_coefficients, conic_tangent, tangent_to_world
+from ..mesh import SurfaceMesh
+from ..objectives import ObjectiveStatus, bracket_objective
+from ..prepared import prepare
+from ..solvers import Status, Walk, solve
+from ..testing.oracle import NumpyMesh, refraction_angle_error, refraction_rounding_bound
+from ..transport.contribution import path_irradiance
+from ..transport.differentials import ray_differential_D
+from .records import CASES, FORMAT_VERSION
+from .scene_records import BRACKETS, pack_scene
+from .scene_registry import SceneSpec
+from .tolerance import SAFETY
+
+#: Where the scene's math comes from (papers and MATH.md; never Python modules).
+EQUATIONS = ("start point: first crossing of segment P -> L with the surface (seed 001 §3.4.2); "
+             "walk: coplanarity conic (seed 001 eq. 10-12, MATH.md §2), tangent (eq. 13-15 with the symmetric "
+             "part, MATH.md §2), edge crossings (eq. 22-24 corrected, MATH.md §3), signed sine in the 'plane' and "
+             "'line' orientations (eq. 19-21, MATH.md §4), walk and dichotomy (§3.4.3-3.4.4) with Illinois false "
+             "position; D by ray differentials (eq. 26-33, signs of MATH.md §6); irradiance "
+             "E = eta^2 T A cos(theta_P) I_e / D (eq. 25 corrected, MATH.md §6)")
+#: Step (m) of the central difference of f along the curve that sizes `M_tol`.
+CURVE_STEP = 1e-5
+#: Runs of the float32 walk on inputs moved by one ulp that decide whether a lane is `stable`.
+PERTURBATIONS = 4
+
+
+def _nudged(x: np.ndarray, rng) -> np.ndarray:
+    """float32 `x` with each coordinate moved by -1, 0 or +1 ulp at random."""
+    step = rng.integers(-1, 2, x.shape)
+    up, down = np.nextafter(x, np.float32(np.inf)), np.nextafter(x, np.float32(-np.inf))
+    return np.where(step > 0, up, np.where(step < 0, down, x)).astype(np.float32)
+
+
+def _df_ds(V, N, P, L, ab, eta):
+    """`|df/ds|` per lane: the signed sine's rate of change along the conic per metre of arc,
+    by a central difference of `CURVE_STEP` (both ends projected back onto the conic),
+    float64."""
+    coef = conic_coefficients(V, N, P, L)
+    t = conic_tangent(coef, ab)
+    length = jnp.linalg.norm(tangent_to_world(V, t), axis=-1)
+    step = jnp.where(length > 0, CURVE_STEP / jnp.where(length > 0, length, 1), 0)[..., None] * t
+    ends = jax.vmap(lambda c, x: jax.vmap(lambda y: project_to_conic(c, y))(x))(
+        coef, jnp.stack([ab - step, ab + step], 1))
+    f, st, _ = jax.vmap(bracket_objective)(V, N, P, L, ends, jnp.broadcast_to(eta, P.shape[:1]))
+    ok = jnp.all(st == ObjectiveStatus.OK, -1) & (length > 0)
+    return jnp.where(ok, jnp.abs(f[:, 1] - f[:, 0]) / (2 * CURVE_STEP), 0)
+
+
+def _transport(mesh, sol, P, L, n_P, intensity, sigma_t, eta):
+    """`D`, its validity and `E` at the solution's points, 0 where the lane is not FOUND."""
+    V, N = mesh.triangle(sol.triangle)
+    D, valid = ray_differential_D(V, N, P, L, sol.barycentric, eta)
+    E, _ = path_irradiance(V, N, P, L, sol.barycentric, eta, intensity, n_P, sigma_t)
+    found = sol.status == Status.FOUND
+    return (np.asarray(jnp.where(found, D, 0)), np.asarray(found & valid).astype(np.uint32),
+            np.asarray(jnp.where(found, E, 0)))
+
+
+def _mesh(vertices, faces, normals, grid, dtype):
+    """The surface in `dtype`; a grid whose float32-rounded vertices fail its check is dropped
+    (only the float64 reference rebuilds from rounded values; it then takes the general path)."""
+    try:
+        return SurfaceMesh.from_arrays(vertices, faces, normals, grid=grid, dtype=dtype)
+    except ValueError:
+        if grid is None:
+            raise
+        return SurfaceMesh.from_arrays(vertices, faces, normals, dtype=dtype)
+
+
+def _split(x64: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """float64 as two float32 parts `hi + lo` (about 48 significant bits)."""
+    hi = x64.astype(np.float32)
+    return hi, (x64 - hi.astype(np.float64)).astype(np.float32)
+
+
+def _stats(x: np.ndarray) -> dict:
+    x = np.asarray(x, np.float64)
+    if x.size == 0:
+        return {"n": 0}
+    return {"n": int(x.size), "max": float(x.max()), "p99": float(np.quantile(x, 0.99)),
+            "median": float(np.median(x))}
+
+
+def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = None):
+    """`(manifest, bytes)` of one scene file with `lanes` lanes (module docstring)."""
+    walk = Walk() if walk is None else walk
+    rng = np.random.default_rng([seed, zlib.crc32(spec.name.encode())])
+    data = spec.build(rng, lanes)
+    eta = float(np.float32(data.eta))
+    with precision("float32"):
+        mesh = _mesh(data.vertices, data.faces, data.normals, data.grid, "float32")
+        V32, N32 = np.asarray(mesh.vertices), np.asarray(mesh.normals)
+        f32 = {k: np.asarray(getattr(data, k), np.float32) for k in ("P", "L", "receiver_normal", "intensity",
+                                                                        "sigma_t")}
+        P, L = jnp.asarray(f32["P"]), jnp.asarray(f32["L"])
+        start = prepare(mesh).start_points(P, L)
+        sol = solve(mesh, P, L, eta=eta, method=walk, features=None, start=start)
+        tol = float(np.float32(walk.tolerance(jnp.float32)))
+        # A lane whose status the testbed itself changes when P and L move by one ulp is
+        # decided by rounding: no port can be required to reproduce it (`conditioned` = 0).
+        nudge = np.random.default_rng([seed, zlib.crc32(spec.name.encode()), 1])
+        stable = np.ones(lanes, bool)
+        for _ in range(PERTURBATIONS):
+            other = solve(mesh, jnp.asarray(_nudged(f32["P"], nudge)), jnp.asarray(_nudged(f32["L"], nudge)),
+                          eta=eta, method=walk, features=None)
+            stable &= np.asarray(other.status) == np.asarray(sol.status)
+        D, D_valid, E = _transport(mesh, sol, P, L, jnp.asarray(f32["receiver_normal"]),
+                                   jnp.asarray(f32["intensity"]), jnp.asarray(f32["sigma_t"]), eta)
+    x64 = {k: v.astype(np.float64) for k, v in f32.items()}
+    with precision("float64"):
+        mesh64 = _mesh(V32.astype(np.float64), np.asarray(mesh.faces), N32.astype(np.float64), mesh.grid, "float64")
+        P64, L64 = jnp.asarray(x64["P"]), jnp.asarray(x64["L"])
+        ref = solve(mesh64, P64, L64, eta=eta, method=Walk(max_steps=walk.max_steps, bracket=walk.bracket,
+                                                           ellipse_samples=walk.ellipse_samples),
+                    features=None)
+        found = np.asarray(sol.status) == Status.FOUND
+        face32 = np.maximum(np.asarray(sol.triangle), 0)
+        V, N = mesh64.triangle(jnp.asarray(face32))
+        ab32 = jnp.asarray(np.asarray(sol.barycentric), jnp.float64)
+        slope = np.asarray(_df_ds(V, N, P64, L64, ab32, eta))
+        D64, _, E64 = _transport(mesh64, jax.tree.map(lambda x: x.astype(jnp.float64)
+                                                      if jnp.issubdtype(x.dtype, jnp.floating) else x, sol),
+                                 P64, L64, jnp.asarray(x64["receiver_normal"]), jnp.asarray(x64["intensity"]),
+                                 jnp.asarray(x64["sigma_t"]), eta)
+    face_ref = np.asarray(ref.triangle)
+    has_ref = face_ref >= 0
+    angle = np.full(lanes, -1.0)
+    if has_ref.any():
+        angle[has_ref] = refraction_angle_error(mesh64, face_ref[has_ref], np.asarray(ref.barycentric)[has_ref],
+                                                x64["P"][has_ref], x64["L"][has_ref], eta)
+    # Nor one where refract's float32 rounding at the solution (eta^2 eps / sqrt(k), MATH.md §1)
+    # exceeds tol: there float32 cannot decide |f| <= tol (near the critical angle, P on the
+    # surface). The point: the float64 reference's solution, else the testbed's point.
+    ref_found = np.asarray(ref.status) == Status.FOUND
+    where = np.where(ref_found, face_ref, np.asarray(sol.triangle))
+    at = np.where(ref_found[:, None], np.asarray(ref.barycentric, np.float64), np.asarray(sol.barycentric, np.float64))
+    bound = np.zeros(lanes)
+    has = where >= 0
+    if has.any():
+        bound[has] = refraction_rounding_bound(NumpyMesh.from_mesh(mesh64), where[has], at[has], x64["P"][has], eta,
+                                               np.float32)
+    conditioned = stable & (bound <= tol)
+    # Two points that both pass |f| <= tol lie within 2 tol / |df/ds| of each other along the
+    # curve; SAFETY covers the curvature of f over that stretch. Plus float32 rounding of M.
+    M32 = np.asarray(sol.point, np.float64)
+    rounding = 16 * float(np.finfo(np.float32).eps) * (np.abs(M32).max(-1) + 1)
+    with np.errstate(divide="ignore"):
+        M_tol = np.where(found & (slope > 0), SAFETY * 2 * tol / slope, np.inf) + rounding
+    M_tol = np.minimum(M_tol, np.float32(np.finfo(np.float32).max)).astype(np.float32)
+    M_hi, M_lo = _split(np.asarray(ref.point, np.float64))
+
+    g = mesh.grid
+    scene_rec = {
+        "n_vertices": [len(V32)], "n_faces": [len(data.faces)], "n_lanes": [lanes], "has_grid": [int(g is not None)],
+        "grid_nx": [g.nx if g else 0], "grid_ny": [g.ny if g else 0], "grid_x0": [g.x0 if g else 0.0],
+        "grid_y0": [g.y0 if g else 0.0], "grid_dx": [g.dx if g else 0.0], "grid_dy": [g.dy if g else 0.0],
+        "grid_x1": [g.x0 + g.nx * g.dx if g else 0.0], "grid_y1": [g.y0 + g.ny * g.dy if g else 0.0],
+        "z_min": [V32[:, 2].min()], "z_max": [V32[:, 2].max()], "tol": [tol], "max_steps": [walk.max_steps],
+        "bracket": [BRACKETS[walk.bracket]], "ellipse_samples": [walk.ellipse_samples],
+    }
+    faces = np.asarray(mesh.faces)
+    lane_rec = {
+        **f32, "eta": np.full(lanes, eta),
+        "start_face": np.asarray(start.face), "start_ab": np.asarray(start.barycentric),
+        "start_found": np.asarray(start.found).astype(np.uint32),
+        "face": np.asarray(sol.triangle), "ab": np.asarray(sol.barycentric), "M": np.asarray(sol.point),
+        "status": np.asarray(sol.status), "crossed": np.asarray(sol.crossed), "iterations": np.asarray(sol.iterations),
+        "residual": np.asarray(sol.residual), "D": D, "D_valid": D_valid, "E": E,
+        "M_ref": M_hi, "M_ref_lo": M_lo, "face_ref": face_ref, "ab_ref": np.asarray(ref.barycentric, np.float64),
+        "status_ref": np.asarray(ref.status), "angle_error": angle, "M_tol": M_tol,
+        "conditioned": conditioned.astype(np.uint32),
+        "case_tag": data.case,
+    }
+    buffers, raw = pack_scene({
+        "scene": scene_rec, "vertices": {"position": V32, "normal": N32},
+        "faces": {"v": faces, "neighbor": np.asarray(mesh.neighbors), "neighbor_edge": np.asarray(mesh.neighbor_edge)},
+        "lanes": lane_rec})
+
+    def rel_err(a32, a64):  # over the conditioned lanes: near TIR D -> 0 and its relative error explodes
+        keep = found & conditioned & (np.abs(a64) > 0)
+        return np.abs(a32[keep].astype(np.float64) - a64[keep]) / np.abs(a64[keep])
+
+    err_D, err_E = rel_err(D, np.asarray(D64)), rel_err(E, np.asarray(E64))
+    statuses = np.asarray(sol.status)
+    from .. import __version__
+
+    manifest = {
+        "scene": spec.name,
+        "description": spec.description,
+        "source": data.source,
+        "equations": EQUATIONS,
+        "endianness": "little",
+        "layout": "std430, vec3 padded to 16 bytes; buffers at multiples of 256 bytes",
+        "buffers": buffers,
+        "grid": None if g is None else {"nx": g.nx, "ny": g.ny, "x0": g.x0, "y0": g.y0, "dx": g.dx, "dy": g.dy,
+                                        "layout": "vertex (i, j) = j (nx + 1) + i; cell (i, j) holds faces "
+                                                  "2 (j nx + i) (v00 v10 v11) and 2 (j nx + i) + 1 (v00 v11 v01)"},
+        "eta": eta,
+        "options": {"method": "walk", "dtype": "float32", "tol": tol, "max_steps": walk.max_steps,
+                    "bracket": walk.bracket, "ellipse_samples": walk.ellipse_samples,
+                    "start_points": "grid DDA" if g is not None else "general (first crossing over all faces)",
+                    "reference": {"dtype": "float64", "tol": float(ref_tol(walk))}},
+        "status": [{"code": int(s), "name": s.name, "meaning": s.message} for s in Status],
+        "objective_status": [{"code": int(s), "name": s.name} for s in ObjectiveStatus],
+        "tolerance": {
+            "status": {"agreement": 0.999, "rule": "status equal on at least this fraction of the conditioned "
+                                                   "lanes (conditioned = 1: the testbed's status does not change when "
+                                                   f"P and L move by one ulp, {PERTURBATIONS} random tries, and "
+                                                   "refract's float32 rounding bound at the solution is at most tol); "
+                                                   "the other lanes are decided by rounding and only reported"},
+            "M": {"rule": "where both FOUND: |M - M_port| <= M_tol per lane (2 tol / |df/ds| along the curve, "
+                          f"times {SAFETY}, plus 16 float32 ulps of |M|)"},
+            "angle": {"rule": "every FOUND point of a port: refraction-angle error (float64, at the port's face "
+                              "and barycentrics) <= tol + 4 x the first-order rounding bound of refract in float32"},
+            "D": {"rel": SAFETY * max(float(err_D.max(initial=0.0)), 1e-6), "measured_float32": _stats(err_D),
+                  "rule": "where a port is FOUND on a conditioned lane: |D - D64| <= rel |D64|, D64 the float64 D "
+                          "at the port's point (rel: 4 x the testbed's float32 error at its own points, "
+                          "conditioned lanes, at least 4e-6)"},
+            "E": {"rel": SAFETY * max(float(err_E.max(initial=0.0)), 1e-6), "measured_float32": _stats(err_E),
+                  "rule": "as D, for the irradiance"},
+        },
+        "summary": {
+            "status": {s.name: int(np.sum(statuses == s)) for s in Status if np.any(statuses == s)},
+            "status_ref": {s.name: int(np.sum(face_ref * 0 + np.asarray(ref.status) == s)) for s in Status
+                           if np.any(np.asarray(ref.status) == s)},
+            "found_M_vs_ref_m": _stats(np.linalg.norm(M32 - np.asarray(ref.point), axis=-1)[
+                found & (np.asarray(ref.status) == Status.FOUND)]),
+            "M_tol_m": _stats(M_tol[found]),
+            "stable": int(stable.sum()),
+            "conditioned": int(conditioned.sum()),
+        },
+        "cases": {name: {"code": code, "count": int(np.sum(data.case == code))} for name, code in CASES.items()},
+        "seed": seed,
+        "version": {"format": FORMAT_VERSION, "caustics_jax": __version__},
+    }
+    return manifest, raw
+
+
+def ref_tol(walk: Walk) -> float:
+    """The float64 reference walk's acceptance tolerance."""
+    return Walk(max_steps=walk.max_steps, bracket=walk.bracket).tolerance(np.float64)
+
+
+def write_scenes(out, names, lanes: int, seed: int) -> list:
+    """Write `<scene>.json` and `<scene>.bin` per scene of `names` and `caustics_scene.h` into
+    the existing directory `out`; returns the paths written."""
+    import json
+    from pathlib import Path
+
+    from .scene_records import scene_c_header
+    from .scene_registry import SCENES
+
+    out = Path(out)
+    written = []
+    for name in names:
+        manifest, raw = export_scene(SCENES[name], lanes, seed)
+        (out / f"{name}.json").write_text(json.dumps(manifest, indent=1) + "\n")
+        (out / f"{name}.bin").write_bytes(raw)
+        written += [out / f"{name}.json", out / f"{name}.bin"]
+    (out / "caustics_scene.h").write_text(scene_c_header())
+    written.append(out / "caustics_scene.h")
+    return written

@@ -1,0 +1,41 @@
+// One lane of a scene file: start point, walk, then D (seed 001 eq. 26-33) and the irradiance
+// (eq. 25 corrected, MATH.md §6) at the walk's point, as the testbed's solve and
+// path_irradiance return them: point, face and barycentrics only where a start point
+// exists (else 0, -1, 0), residual the signed sine ('plane') there, D, D_valid and E only
+// where the lane is FOUND (else 0).
+void cj_run(inout Lane r) {
+    int face;
+    vec2 ab0;
+    bool found = cj_start_point(r.P, r.L, face, ab0);
+    r.start_face = face;
+    r.start_ab = ab0;
+    r.start_found = found ? 1u : 0u;
+    WalkState s;
+    if (found) {
+        s = cj_walk(r.P, r.L, face, ab0, true, r.eta, cj_scene.tol, int(cj_scene.max_steps),
+                    cj_scene.bracket == 0u, int(cj_scene.ellipse_samples));
+    } else {  // what _first_triangle builds for a lane without a start point
+        s.status = CJ_NO_CROSSING;
+        s.steps = 0;
+        s.crossed = 0;
+    }
+    r.status = s.status;
+    r.iterations = uint(s.steps);
+    r.crossed = uint(s.crossed);
+    r.face = found ? s.face : -1;
+    r.ab = found ? s.best_ab : vec2(0.0);
+    vec3 V[3], N[3];
+    cj_triangle(r.face, V, N);
+    r.M = found ? cj_barycentric_point(V, r.ab) : vec3(0.0);
+    float f = 0.0;
+    uint st;
+    if (found) cj_signed_sine(V, N, r.P, r.L, r.ab, r.eta, f, st);
+    r.residual = f;
+    float D = 0.0, E = 0.0;
+    uint D_valid = 0u;
+    if (s.status == CJ_FOUND)
+        E = cj_path_irradiance(V, N, r.P, r.L, r.ab, r.eta, r.intensity, r.receiver_normal, r.sigma_t, D, D_valid);
+    r.D = D;
+    r.D_valid = D_valid;
+    r.E = E;
+}
