@@ -9,8 +9,10 @@ repeated `solve` / `irradiance` calls on the same mesh do no host analysis at al
 - `features`: `features.features(mesh)` (flat closed form, lane compaction);
 - `lo`, `hi`, `pad`: the float64 bounding box and a conservative margin, to keep lanes
   whose segment cannot reach the surface out of the start-point search;
-- `bvh`: the general start-point path's BVH (`start_points.build_bvh`), built on first
-  use for meshes without a regular grid.
+- `accel`: the start-point acceleration structure (`start_points.build_accel`: the exact
+  cells of a regular heightfield grid, given by `mesh.grid` or recognised from the
+  arrays by `grid.detect_grid`; else the faces binned over the plane; else a BVH), built
+  on first use and shared by `start_points` and `occlusion.segment_blocked`.
 
 `solve` and `irradiance` accept a `PreparedSurface` wherever they accept a `SurfaceMesh`.
 The cache holds a weak reference to the mesh: a prepared surface lives as long as its mesh.
@@ -19,6 +21,7 @@ A mesh changed with `eqx.tree_at` (animated water) is a new object and is prepar
 
 from __future__ import annotations
 
+import copy
 import weakref
 
 import numpy as np
@@ -26,7 +29,7 @@ import numpy as np
 from .features import SceneFeatures, features
 from .lanes import padded_mesh
 from .mesh import SurfaceMesh
-from .start_points import FaceBVH, StartPoint, build_bvh, start_points
+from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, start_points
 
 
 class _Analysis:
@@ -39,6 +42,7 @@ class _Analysis:
         V = np.asarray(mesh.vertices, np.float64)
         self.lo, self.hi = V.min(0), V.max(0)
         self.pad = 1e-4 * float(np.max(self.hi - self.lo) + np.max(np.abs(V)) + 1)
+        self.accel: Accel | None = None
         self.bvh: FaceBVH | None = None
 
 
@@ -66,17 +70,29 @@ class PreparedSurface:
         return self.mesh.dtype
 
     @property
-    def bvh(self) -> FaceBVH | None:
-        """The general start-point path's BVH (None for a regular grid, which needs none)."""
-        if self.mesh.grid is not None:
-            return None
+    def accel(self) -> Accel:
+        """The start-point acceleration structure (`build_accel`), built on first use."""
+        if self._a.accel is None:
+            self._a.accel = build_accel(self.mesh)
+        return self._a.accel
+
+    @property
+    def bvh(self) -> FaceBVH:
+        """The general (reference) path's BVH, built on first use (`accel` is faster)."""
         if self._a.bvh is None:
-            self._a.bvh = build_bvh(self.mesh)
+            self._a.bvh = self.accel if isinstance(self.accel, FaceBVH) else build_bvh(self.mesh)
         return self._a.bvh
+
+    def with_accel(self, accel: Accel) -> PreparedSurface:
+        """This surface with another start-point structure (e.g. `build_bvh(mesh)`, the
+        reference path), for comparisons; the cached analysis is not changed."""
+        analysis = copy.copy(self._a)
+        analysis.accel = accel
+        return PreparedSurface(self.mesh, analysis)
 
     def start_points(self, P, L) -> StartPoint:
         """`start_points.start_points` with this surface's acceleration structure."""
-        return start_points(self.mesh, P, L, bvh=self.bvh)
+        return start_points(self.mesh, P, L, accel=self.accel)
 
     def may_cross(self, P: np.ndarray, L: np.ndarray) -> np.ndarray:
         """`(N,)` False where the segment's bounding box misses the surface's: those lanes
