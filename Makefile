@@ -40,6 +40,7 @@ figures: $(STAMP)
 	$(PY) -m experiments.features_benchmark
 	$(PY) -m experiments.stability
 	$(PY) -m experiments.scaling
+	$(PY) -m experiments.precision_agreement
 	$(VENV)/bin/caustics-jax demo --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 # Execute every notebook headless (nbclient); fails on any cell error. A full run rewrites the

@@ -209,6 +209,9 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
             bound = sig.bind(*args, **kwargs)
             bound.apply_defaults()
             a = bound.arguments
+            for n in (*arrays, *params, *ints):  # None only where it is the documented default
+                if a[n] is None and sig.parameters[n].default is not None:
+                    raise ValueError(f"{fn_name}: {n} must be a real number or an array of real numbers, got None")
             given = [(n, a[n]) for n in arrays if a[n] is not None]
             if dtype_arg is not None:
                 dtype = check_float_dtype(a[dtype_arg])

@@ -473,3 +473,22 @@ def test_zero_lanes_irradiance_start_points_and_photons(pool, feats):
     assert pm.n_photons == 0 and pm.irradiance.shape == (8, 8) and not pm.irradiance.any()
     pm = cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid._replace(nx=0), n_photons=16)
     assert pm.irradiance.shape == (8, 0)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda: K.ccm0_size(1j, 4.0, 0.01), "r_width"), (lambda: K.ccm0_size(4.0, 4.0, -1), "p must be"),
+    (lambda: K.cascade_deltas(8, 8, 2.5), "s must be an integer"), (lambda: K.cascade_deltas("8", 8, 2), "ccm0_x"),
+    (lambda: K.cascade_thread_counts(8, 8, 2, 2**40), "n_levels"),
+    (lambda: K.cascade_dispatch(np.arange(4), 8, 8, None, 2), "s must be an integer"),
+    (lambda: K.bilateral_denoise(*_IMG, 10.0, passes=2**40), "passes"),
+    (lambda: K.denoise_subpass(*_IMG, 10.0, axis=True), "axis"),
+    (lambda: K.fixed_point_accumulate(np.ones(3), num_segments=0), "num_segments"),
+    (lambda: K.sprite_size("4", 4.0, 256, 256, 1.0, np.ones(2)), "r_width"),
+    (lambda: K.sprite_size(4.0, 4.0, 1, 256, 1.0, np.ones(2)), "ccm0_x"),
+    (lambda: K.schlick_f0(-1.0), "eta"), (lambda: K.schlick_f0(None), "eta"), (lambda: cj.refract(None, _Z, 1.3), "I"),
+])
+def test_static_configuration_and_missing_arrays_are_value_errors(call, match):
+    """Static (Python) configuration is checked like options; `None` is refused unless it
+    is the documented default (a huge `passes` would loop for ever instead)."""
+    with pytest.raises(ValueError, match=match):
+        call()

@@ -19,10 +19,11 @@ DTYPES = ["float32", "float64"]
 N_SIDE = 16  # receivers per side: 256 lanes per example
 
 # Position error of a found point after a transform, relative to the scene size (4.2 m),
-# between the transformed solve and the transformed original. Found points satisfy
-# |f| <= tol (1e-5 float32, 1e-10 float64), which pins M to ~tol * distance; bounds are
-# ~10x the maxima measured over the ci examples (see each test).
-POS_TOL = {"float32": 2e-4, "float64": 1e-8}
+# between the transformed solve and the transformed original. Measured maxima over 10
+# scales in [1e-3, 1e3], 8 translations in [-5, 5]^3 and 8 rotations (256 lanes each, all
+# found, no status change): float32 1.1e-7 (scale), 1.6e-6 (translate), 2.8e-6 (rotate);
+# float64 1.7e-16, 3.3e-16, 2.2e-16. Bounds are ~10x the largest.
+POS_TOL = {"float32": 3e-5, "float64": 4e-15}
 
 
 def _pool_arrays(n_triangles=512, seed=0, choppiness=0.0):
@@ -77,7 +78,7 @@ def _assert_same_lanes(sol, ref, transform, dtype, scale=1.0):
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
-@settings(max_examples=6)
+@settings(max_examples=5)
 @given(log_s=st.floats(-3, 3))
 def test_scaling_the_whole_scene_scales_the_solution(dtype, log_s):
     s = 10.0**log_s
@@ -104,8 +105,9 @@ def _rotation(q):
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
+@pytest.mark.filterwarnings("ignore:surface normals")  # a rotation may turn the surface upside down
 @pytest.mark.parametrize("dtype", DTYPES)
-@settings(max_examples=6)
+@settings(max_examples=4)
 @given(q=st.tuples(*[st.floats(-1, 1)] * 4).filter(lambda q: np.linalg.norm(q) > 0.1))
 def test_rotating_a_general_mesh_with_its_lanes_rotates_the_solution(dtype, q):
     R = _rotation(q)
@@ -116,7 +118,7 @@ def test_rotating_a_general_mesh_with_its_lanes_rotates_the_solution(dtype, q):
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
-@settings(max_examples=4)
+@settings(max_examples=3)
 @given(cuts=st.lists(st.integers(1, N_SIDE**2 - 1), max_size=6, unique=True), alone=st.integers(0, N_SIDE**2 - 1))
 def test_batching_never_changes_a_lanes_result(dtype, cuts, alone):
     V, F, N, P, L = POOL

@@ -13,6 +13,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._precision import float_inputs
+from ..arguments import check_real
 from ..geometry import dot
 from ._util import as_float, check, check_last_axis, concrete, float_dtype
 
@@ -49,13 +50,14 @@ def schlick_f0(eta):
     array by the kernels' input contract (`_precision.float_inputs`).
     """
     if isinstance(eta, int | float) and not isinstance(eta, bool):
-        eta = float(eta)
+        eta = check_real("eta", eta, 0, lo_open=True)
         return ((eta - 1) / (eta + 1)) ** 2
     return _schlick_f0_array(eta)
 
 
 @float_inputs("eta")
 def _schlick_f0_array(eta):
+    check(eta, "eta", lower=0, strict=True)
     return ((eta - 1) / (eta + 1)) ** 2
 
 

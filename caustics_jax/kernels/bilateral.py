@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._precision import float_inputs
+from ..arguments import check_int
 from ..geometry import dot
 from ._util import as_float, check, check_last_axis, float_dtype
 
@@ -124,8 +125,8 @@ def denoise_subpass(
             "expected C (H,W,3), depth (H,W), pos (H,W,3); "
             f"got {C.shape}, {depth.shape}, {pos.shape}"
         )
-    if axis not in (0, 1):
-        raise ValueError(f"axis must be 0 (y) or 1 (x), got {axis}")
+    if isinstance(axis, bool) or axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (y) or 1 (x), got {axis!r}")
     dtype = float_dtype(C, depth, pos)
     C, depth, pos = C.astype(dtype), depth.astype(dtype), pos.astype(dtype)
     rho, lam, delta = adaptive_kernel_params(luminance(C), lum_l_min, c_scene_factor)
@@ -155,8 +156,7 @@ def bilateral_denoise(
     eps=EPS_ALG4,
 ) -> Float[Array, "H W 3"]:
     """Separable adaptive cross-bilateral denoiser (seed 004 §3.3): x then y sub-pass, repeated."""
-    if passes < 0:
-        raise ValueError(f"passes must be >= 0, got {passes}")
+    passes = check_int("passes", passes, 0, 64)
     for _ in range(passes):
         C = denoise_subpass(C, depth, pos, lum_l_min, 1, c_scene_factor, eps)
         C = denoise_subpass(C, depth, pos, lum_l_min, 0, c_scene_factor, eps)

@@ -20,6 +20,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._precision import float_inputs
+from ..arguments import check_int, check_real
 from ._util import as_float, check, check_last_axis, float_dtype
 
 
@@ -77,8 +78,8 @@ def ccm0_size(r_width, r_height, p) -> int:
     256, 512, 1024 or 2048 (square) as `max(r.width, r.height) / p` is below 256, 512,
     1024, or not. Static configuration, so plain Python.
     """
-    if p <= 0 or r_width <= 0 or r_height <= 0:
-        raise ValueError("range and precision must be positive")
+    r_width, r_height, p = (check_real(n, v, 0, lo_open=True) for n, v in
+                            (("r_width", r_width), ("r_height", r_height), ("p", p)))
     ratio = max(r_width, r_height) / p
     for size in (256, 512, 1024):
         if ratio < size:
@@ -92,8 +93,8 @@ def cascade_deltas(ccm0_x: int, ccm0_y: int, s: int) -> tuple[int, int]:
     Raises ValueError unless they are whole texels, which Alg. 1's integer arithmetic
     needs (e.g. power-of-two maps with `s` a power of two).
     """
-    if s < 2 or int(s) != s:
-        raise ValueError(f"s must be an integer >= 2, got {s}")
+    ccm0_x, ccm0_y = check_int("ccm0_x", ccm0_x, 1, 2**16), check_int("ccm0_y", ccm0_y, 1, 2**16)
+    s = check_int("s", s, 2, 2**16)
     dx, dy = ccm0_x * (s - 1) / (2 * s), ccm0_y * (s - 1) / (2 * s)
     if dx != int(dx) or dy != int(dy) or ccm0_x % s or ccm0_y % s:
         raise ValueError(f"ccm0 {ccm0_x}x{ccm0_y} with s={s} gives fractional texels")
@@ -109,8 +110,7 @@ def cascade_thread_counts(ccm0_x: int, ccm0_y: int, s: int, n_levels: int) -> tu
     The total (eq. 5) is `sum(...)`; eq. 5 sums to `N` where levels run `0..N-1`.
     """
     cascade_deltas(ccm0_x, ccm0_y, s)
-    if n_levels < 1:
-        raise ValueError(f"n_levels must be >= 1, got {n_levels}")
+    check_int("n_levels", n_levels, 1, 64)
     ring = ccm0_x * ccm0_y - (ccm0_x // s) * (ccm0_y // s)
     return (ccm0_x * ccm0_y,) + (ring,) * (n_levels - 1)
 

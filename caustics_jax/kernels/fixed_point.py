@@ -18,6 +18,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, UInt32
 
 from .._precision import float_inputs
+from ..arguments import check_int
 from ._util import check
 
 FRACTION_BITS = 28
@@ -83,6 +84,7 @@ def fixed_point_accumulate(
     by summing the four bytes of every code separately, which is exact in 32-bit
     arithmetic for up to 2^24 addends per segment, and propagating the carries.
     """
+    num_segments = check_int("num_segments", num_segments, 1, 2**24)
     x = jnp.asarray(x)
     if x.ndim != 1:
         raise ValueError(f"x must be 1-D, got shape {x.shape}")

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._precision import float_inputs
+from ..arguments import check_int, check_real
 from ..geometry import dot, safe_normalize
 from ._util import as_float, check, check_last_axis, float_dtype, safe_div
 
@@ -32,8 +33,9 @@ def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*bat
     """
     check(sigma, "sigma", lower=0)
     check(q0, "q0", lower=0)
-    if min(ccm0_x, ccm0_y) < 2 or min(r_width, r_height) <= 0:
-        raise ValueError("need ccm0 >= 2 texels and a positive light range")
+    r_width = check_real("r_width", r_width, 0, lo_open=True)
+    r_height = check_real("r_height", r_height, 0, lo_open=True)
+    ccm0_x, ccm0_y = check_int("ccm0_x", ccm0_x, 2, 2**16), check_int("ccm0_y", ccm0_y, 2, 2**16)
     sigma = jnp.asarray(sigma)
     dtype = float_dtype(sigma)
     spacing = (r_width / (ccm0_x - 1) * r_height / (ccm0_y - 1)) ** 0.5
