@@ -37,9 +37,10 @@ from ..mesh import SurfaceMesh
 from ..progress import progress as progress_bar
 from ..start_points import build_bvh, first_crossing
 
-#: Largest `n_photons` of one `photon_irradiance` call (about a day of tracing on a CPU at
-#: 10^7 photons/s): a larger count is a typo, refused rather than left running.
-MAX_PHOTONS = 2**40
+#: Largest `n_photons` of one `photon_irradiance` call: 2^32 photons are hours of tracing on
+#: a CPU (the experiments use up to 2^26); a larger count is a typo, refused rather than
+#: left running for days.
+MAX_PHOTONS = 2**32
 
 
 class ReceiverGrid(NamedTuple):
