@@ -37,7 +37,7 @@ from jaxtyping import Array, Float, Int
 
 from .crossing import clip_to_box, first_of, triangle_crossing
 from .grid import GridLayout
-from .lanes import map_lanes
+from .lanes import LANE_CHUNK, map_lanes
 from .mesh import SurfaceMesh
 
 #: Padding of a face's projected box when binning, in ulps of the coordinates' magnitude:
@@ -47,6 +47,8 @@ PAD_ULPS = 256
 #: Target number of faces per cell by `bin_faces` (measured best of 0.25, 0.5, 1, 2
 #: on a jittered 32k-triangle mesh: docs/mesh.md).
 FACES_PER_CELL = 0.5
+#: Faces `bin_faces` processes at a time (its temporaries then stay in cache).
+BIN_BLOCK = 8192
 #: Longest cell list `bin_faces` accepts; a mesh that needs more (a fan of faces around one
 #: point, a mesh folded many times over the plane) is left to the BVH.
 MAX_CELL_FACES = 48
@@ -89,8 +91,8 @@ def bin_faces(mesh: SurfaceMesh, *, faces_per_cell: float = FACES_PER_CELL,
               max_cell_faces: int = MAX_CELL_FACES) -> FaceCells | None:  # fmt: skip
     """Bin any mesh's faces into a uniform grid over the plane of its two largest extents.
 
-    About `F / faces_per_cell` square cells; each lists the faces whose projected bounding
-    box, padded by `PAD_ULPS` ulps of the coordinates, overlaps it. Numpy, O(F log F).
+    About `F / faces_per_cell` square cells; each lists the faces whose projected triangle,
+    padded by `PAD_ULPS` ulps of the coordinates, meets it. Numpy, O(F log F).
     Returns None when some cell would list more than `max_cell_faces` faces.
     """
     V = np.asarray(mesh.vertices, np.float64)
@@ -112,27 +114,28 @@ def bin_faces(mesh: SurfaceMesh, *, faces_per_cell: float = FACES_PER_CELL,
              for k in range(2)]  # fmt: skip
     last = [np.clip(np.searchsorted(lines[k], hi[:, k] + pad, side="right") - 1, 0, n_cells[k] - 1)
             for k in range(2)]  # fmt: skip
-    span_i, span_j = last[0] - first[0] + 1, last[1] - first[1] + 1
-    count = span_i * span_j
-    face = np.repeat(np.arange(len(F)), count)
-    k = np.arange(len(face)) - np.repeat(np.cumsum(count) - count, count)
-    si = np.repeat(span_i, count)
-    ci, cj = first[0][face] + k % si, first[1][face] + k // si
-    # Keep the (face, cell) pairs whose cell meets the projected triangle, not just its box
-    # (2D separating axes: a triangle edge with all four cell corners beyond it, by more
-    # than the padding, separates them).
-    corners = np.stack([np.stack([lines[0][ci + a], lines[1][cj + b]], -1)
-                        for a in (0, 1) for b in (0, 1)], 1)  # (pairs, 4, 2)  # fmt: skip
-    keep = np.ones(len(face), bool)
-    for e in range(3):
-        p0, p1, p2 = T[face, e], T[face, (e + 1) % 3], T[face, (e + 2) % 3]
-        edge = p1 - p0
-        length = np.maximum(np.hypot(edge[:, 0], edge[:, 1]), 1e-300)
-        side = np.sign(edge[:, 0] * (p2 - p0)[:, 1] - edge[:, 1] * (p2 - p0)[:, 0])
-        rel = corners - p0[:, None]
-        dist = side[:, None] * (edge[:, None, 0] * rel[..., 1] - edge[:, None, 1] * rel[..., 0]) / length[:, None]
-        keep &= dist.max(1) >= -pad
-    face, cell_id = face[keep], cj[keep] * n_cells[0] + ci[keep]
+    # Per face and edge: the inward normal n (0 for a face that projects to a sliver: kept
+    # wherever its box is), n . (edge start) and the padding in units of |n|.
+    edge = np.roll(T, -1, axis=1) - T
+    inward = np.stack([-edge[..., 1], edge[..., 0]], -1)
+    inward *= np.sign(np.sum(inward * (np.roll(T, -2, axis=1) - T), -1))[..., None]
+    offset = np.sum(inward * T, -1) - pad * np.hypot(inward[..., 0], inward[..., 1])
+    faces, cell_ids = [], []
+    for start in range(0, len(F), BIN_BLOCK):  # blocks of faces: temporaries stay in cache
+        block = slice(start, start + BIN_BLOCK)
+        face, ci, cj = _candidate_cells([f[block] for f in first], [x[block] for x in last], start)
+        # Keep the (face, cell) pairs whose cell meets the projected triangle, not just its
+        # box (2D separating axes: an edge with the whole cell beyond it, by more than the
+        # padding, separates them; the cell's farthest point along -n is its centre plus
+        # |n_u| h_u + |n_v| h_v, h the half sides).
+        centre = np.stack([lines[0][ci] + lines[0][ci + 1], lines[1][cj] + lines[1][cj + 1]], -1) / 2
+        half = np.stack([lines[0][ci + 1] - lines[0][ci], lines[1][cj + 1] - lines[1][cj]], -1) / 2
+        n = inward[face]
+        reach = np.einsum("mek,mk->me", n, centre) + np.einsum("mek,mk->me", np.abs(n), half)
+        keep = np.all(reach >= offset[face], axis=1)
+        faces.append(face[keep])
+        cell_ids.append(cj[keep] * n_cells[0] + ci[keep])
+    face, cell_id = np.concatenate(faces), np.concatenate(cell_ids)
     per_cell = np.bincount(cell_id, minlength=int(n_cells[0] * n_cells[1]))
     width = int(per_cell.max())
     if width > max_cell_faces:
@@ -145,6 +148,16 @@ def bin_faces(mesh: SurfaceMesh, *, faces_per_cell: float = FACES_PER_CELL,
                      faces=jnp.asarray(table, jnp.int32), axes=(u, v, w), kind="bins")  # fmt: skip
 
 
+def _candidate_cells(first, last, offset: int):
+    """`(face, i, j)` for every cell of every face's padded box (faces numbered from `offset`)."""
+    span_i, span_j = last[0] - first[0] + 1, last[1] - first[1] + 1
+    count = span_i * span_j
+    local = np.repeat(np.arange(len(count)), count)
+    k = np.arange(len(local)) - np.repeat(np.cumsum(count) - count, count)
+    si = span_i[local]
+    return local + offset, first[0][local] + k % si, first[1][local] + k // si
+
+
 def first_hit_cells(mesh: SurfaceMesh, cells: FaceCells, A: Float[Array, "n 3"], B: Float[Array, "n 3"],
                     exclude: Int[Array, " n"] | None = None, *, s_lo: float = 0.0, s_hi: float = 1.0,
                     widen: bool, chunk: int | None = None):  # fmt: skip
@@ -154,12 +167,15 @@ def first_hit_cells(mesh: SurfaceMesh, cells: FaceCells, A: Float[Array, "n 3"],
     `widen=True` accepts crossings within the rounding bound outside the window (start
     points: a crossing at an end is kept); `widen=False` shrinks the window by it
     (occlusion: a crossing at an end, within rounding, is not a blocker). Lanes run in
-    vmapped chunks of `chunk` (default `lanes.LANE_CHUNK`, 256: each chunk runs until its
-    slowest lane; measured on 32k lanes of a 32k-triangle wavy pool, 256 lanes gave 1.6-1.9x
-    the throughput of 4096 on the grid cells and the same on binned cells). Returns
+    vmapped chunks of `chunk` (default on a CPU `lanes.LANE_CHUNK`, 256: each chunk runs
+    until its slowest lane; measured on 32k lanes of a 32k-triangle wavy pool, 256 lanes gave
+    1.6-1.9x the throughput of 4096 on the grid cells and the same on binned cells; on an
+    accelerator, all lanes in one vmap). Returns
     `(face, ab, s)`: face -1, `ab = 0`, `s = inf` where there is none. One jitted call
     (the window and `widen` are static).
     """
+    if chunk is None:  # small chunks pay on a CPU; an accelerator wants every lane at once
+        chunk = LANE_CHUNK if jax.default_backend() == "cpu" else max(A.shape[0], 1)
     # The mesh's arrays, not the mesh: its static `grid` would key a compile per layout.
     return _first_hit_cells(mesh.vertices, mesh.faces, cells, A, B, exclude, float(s_lo), float(s_hi), widen,
                             chunk)  # fmt: skip
