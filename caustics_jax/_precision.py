@@ -23,9 +23,13 @@ def precision(dtype):
     >>> with precision("float64"):
     ...     x = jnp.zeros(3)  # float64 inside, float32 default outside
     """
-    dtype = jnp.dtype(dtype)
-    if dtype not in (jnp.dtype("float32"), jnp.dtype("float64")):
-        raise ValueError(f"precision must be float32 or float64, got {dtype}")
+    given = dtype
+    try:
+        dtype = jnp.dtype(dtype) if dtype is not None else None
+    except (TypeError, ValueError):
+        dtype = None
+    if dtype is None or dtype not in (jnp.dtype("float32"), jnp.dtype("float64")):  # (np.dtype(None) is float64)
+        raise ValueError(f"precision must be 'float32' or 'float64', got {given!r}")
     with jax.enable_x64(dtype == jnp.dtype("float64")):
         yield dtype
 
@@ -233,7 +237,11 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
             for n in ints:
                 if a[n] is None:
                     continue
-                a[n] = jnp.asarray(_check_integer(f"{fn_name}: {n}", a[n]))
+                try:
+                    a[n] = jnp.asarray(_check_integer(f"{fn_name}: {n}", a[n]))
+                except OverflowError:
+                    raise ValueError(f"{fn_name}: {n} must hold integers that fit int32 (indices), "
+                                     f"got {a[n]!r}") from None
                 if dims.get(n):
                     batch = _check_shape(fn_name, n, a[n].shape, dims[n])
                     if batch is not None:

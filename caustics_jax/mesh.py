@@ -17,6 +17,7 @@ import dataclasses
 import warnings
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
@@ -262,7 +263,14 @@ def cross_edge(
     (or for `face < 0`) `next_face = next_edge = -1` and `next_t, next_ab` are the
     exit point's own `t` and barycentrics.
     """
+    if not all(hasattr(mesh, a) for a in ("neighbors", "neighbor_edge", "dtype")):  # (duck-typed: the export
+        raise ValueError(f"cross_edge: mesh must be a caustics_jax.SurfaceMesh (its adjacency), "  # passes arrays)
+                         f"got {type(mesh).__name__}")
     face, edge = jnp.asarray(face), jnp.asarray(edge)
+    n_faces = mesh.neighbors.shape[0]
+    if not isinstance(face, jax.core.Tracer) and face.size and int(np.max(face)) >= n_faces:
+        raise ValueError(f"cross_edge: face must lie below the mesh's {n_faces} faces (or be < 0: no face), "
+                         f"got {int(np.max(face))}")
     t = jnp.asarray(t, dtype=mesh.dtype)
     valid_in = face >= 0
     f, k = jnp.maximum(face, 0), jnp.clip(edge, 0, 2)

@@ -486,6 +486,10 @@ def test_zero_lanes_irradiance_start_points_and_photons(pool, feats):
     (lambda: K.sprite_size("4", 4.0, 256, 256, 1.0, np.ones(2)), "r_width"),
     (lambda: K.sprite_size(4.0, 4.0, 1, 256, 1.0, np.ones(2)), "ccm0_x"),
     (lambda: K.schlick_f0(-1.0), "eta"), (lambda: K.schlick_f0(None), "eta"), (lambda: cj.refract(None, _Z, 1.3), "I"),
+    (lambda: cj.precision(None).__enter__(), "precision"), (lambda: cj.precision("x").__enter__(), "precision"),
+    (lambda: cj.cross_edge("mesh", 0, 0, 0.5), "mesh"), (lambda: cj.cross_edge(_MESH, 2**40, 0, 0.5), "face"),
+    (lambda: compare.CompareConfig(dtypes=None).validate(), "dtypes"),
+    (lambda: cj.start_points(_MESH, 2**40, np.ones(3)), "shape"),
 ])
 def test_static_configuration_and_missing_arrays_are_value_errors(call, match):
     """Static (Python) configuration is checked like options; `None` is refused unless it
