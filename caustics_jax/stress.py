@@ -20,6 +20,11 @@ the planted point, and every solver must return that point or another valid solu
 - `far_light`: `L` `1e5`-`1e6` m away (nearly directional).
 - `scale_1e-3`, `scale_1e4`: the baseline scene and paths scaled by `1e-3` and `1e4`.
 - `large`: the baseline on a 250,632-triangle pool (too large for the exhaustive reference).
+- `multi_solution`: several refraction points per receiver: a lagoon (irregular Delaunay
+  mesh) under two steep short waves (amplitude 0.1 m, wavelengths 0.6-0.9 m, slopes
+  near 1), receivers 0.5-2.5 m below, past the waves' focal distance (about 0.4 m): the
+  light reaching one receiver folds over several sheets of the caustic. The planted
+  point is one of the solutions; the certified exhaustive reference counts the others.
 
 Generators reuse `scenes.wavy_pool` / `scenes.flat_pool` (the surfaces) and
 `testing.planted_mesh_paths` (the planted faces and points); `plant` only adds what they
@@ -188,6 +193,12 @@ def _scaled(case: StressCase, s: float, name: str) -> StressCase:
                                P=case.P * s, L=case.L * s)
 
 
+def _steep_lagoon(seed):
+    with precision("float64"):
+        return _surface(scenes.lagoon(SMALL_TRIANGLES, seed=seed, size=(4.0, 4.0), amplitude=0.1, n_waves=2,
+                                      wavelength=(0.6, 0.9), dtype="float64"))
+
+
 def _make(name: str, n: int, seed: int) -> StressCase:
     rng = np.random.default_rng(seed)
     if name == "baseline":
@@ -218,11 +229,14 @@ def _make(name: str, n: int, seed: int) -> StressCase:
         return _scaled(_planted(name, _wavy(seed=seed), n, seed), float(name.split("_")[1]), name)
     if name == "large":
         return _planted(name, _wavy(LARGE_TRIANGLES, seed=seed), n, seed)
+    if name == "multi_solution":
+        return _planted(name, _steep_lagoon(seed), n, seed, depth=(0.5, 2.5), max_angle_deg=30.0)
     raise ValueError(f"unknown stress category {name!r}; known: {CATEGORIES}")
 
 
 CATEGORIES = ("baseline", "grazing", "near_tir", "sliver", "flat", "nearly_flat", "vertex_edge",
-              "vertex_edge_flat", "p_near_surface", "far_light", "scale_1e-3", "scale_1e4", "large")
+              "vertex_edge_flat", "p_near_surface", "far_light", "scale_1e-3", "scale_1e4", "large",
+              "multi_solution")
 
 
 def stress_case(category: str, n: int = 256, seed: int = 0) -> StressCase:

@@ -215,6 +215,67 @@ def run_solvers(case: stress.StressCase, n_exhaustive: int) -> dict:
     return rows
 
 
+# %% several solutions per receiver (category `multi_solution`)
+def multi_solution_recall(case: stress.StressCase, n_lanes: int) -> dict:
+    """Recall of the reference's solutions for each method on the first `n_lanes` paths:
+    the fraction of all solutions found, and of receivers with at least one. The certified
+    exhaustive reference (float64) defines the solutions; found points match within 1e-6 m
+    (1e-4 m in float32)."""
+    from caustics_jax.transport import sms_biased
+
+    out = {}
+    with cj.precision("float64"):
+        mesh = case.mesh("float64")
+        P, L = case.P[:n_lanes], case.L[:n_lanes]
+        ref = cj.solve(mesh, P, L, method="exhaustive", return_all=True)
+    ref_sets = [ref.all_points[i, : ref.count[i]] for i in range(n_lanes)]
+
+    def score(sets, tol):
+        hit = sum(sum(bool(len(m)) and np.min(np.linalg.norm(m - q, axis=-1)) < tol for q in r)
+                  for r, m in zip(ref_sets, sets, strict=True))
+        any_ = np.mean([len(r) == 0 or any(bool(len(m)) and np.min(np.linalg.norm(m - q, axis=-1)) < tol
+                                           for q in r) for r, m in zip(ref_sets, sets, strict=True)])
+        return {"solutions": int(ref.count.sum()), "found": int(hit), "recall": hit / max(int(ref.count.sum()), 1),
+                "receivers_with_one": float(any_)}
+
+    for dtype in DTYPES:
+        tol = 1e-6 if dtype == "float64" else 1e-4
+        with cj.precision(dtype):
+            mesh = case.mesh(dtype)
+            Pd, Ld = np.asarray(P, dtype), np.asarray(L, dtype)
+            for name, method, opts in (("walk", "walk", {}), ("newton", *CONFIGS["newton-hv"]),
+                                       ("walk all paths", "walk", {"solutions": "all"})):
+                t0 = time.perf_counter()
+                sol = cj.solve(mesh, Pd, Ld, method=method, **opts)
+                seconds = time.perf_counter() - t0
+                if isinstance(sol, cj.ExhaustiveSolution):
+                    sets = [np.asarray(sol.all_points[i, : sol.count[i]], np.float64) for i in range(n_lanes)]
+                else:
+                    pts, found = np.asarray(sol.point, np.float64), np.asarray(sol.found)
+                    sets = [pts[i:i + 1] if found[i] else np.zeros((0, 3)) for i in range(n_lanes)]
+                out[f"{name}/{dtype}"] = {**score(sets, tol), "seconds": seconds}
+    with cj.precision("float64"):
+        for k in (4, 16):
+            est = sms_biased(case.mesh("float64"), P, L, k=k, seed=0,
+                             intensity=1.0, receiver_normal=[0.0, 0.0, 1.0])
+            out[f"SMS biased k={k}/float64"] = {"solutions": int(ref.count.sum()), "found": int(est.paths.sum()),
+                                                "recall": float(est.paths.sum() / max(ref.count.sum(), 1))}
+    out["reference_paths_per_receiver"] = np.bincount(ref.count).tolist()
+    return out
+
+
+def multi_table(rec: dict) -> str:
+    lines = ["| method | dtype | solutions found / reference | recall | receivers with >= 1 found |",
+             "|---|---|---|---|---|"]
+    for key, v in rec.items():
+        if "/" not in key:
+            continue
+        name, dtype = key.rsplit("/", 1)
+        one = "" if "receivers_with_one" not in v else f"{v['receivers_with_one']:.3f}"
+        lines.append(f"| {name} | {dtype} | {v['found']} / {v['solutions']} | {v['recall']:.3f} | {one} |")
+    return "\n".join(lines)
+
+
 def run(n: int = 256, n_exhaustive: int = 64, categories=stress.CATEGORIES, seed: int = 0) -> dict:
     cj.enable_x64()  # float64 available; every float32 array is built explicitly
     result = {"n": n, "n_exhaustive": n_exhaustive, "seed": seed, "categories": {}}
@@ -224,6 +285,8 @@ def run(n: int = 256, n_exhaustive: int = 64, categories=stress.CATEGORIES, seed
         kern = run_kernels(case)
         solv = run_solvers(case, n_exhaustive)
         result["categories"][c] = {"n_faces": case.n_faces, "kernels": kern, "solvers": solv}
+        if c == "multi_solution":
+            result["categories"][c]["recall"] = multi_solution_recall(case, n_exhaustive)
         log(f"{c}: {time.perf_counter() - t0:.1f} s")
     return result
 
@@ -343,8 +406,18 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="64 paths, 16 exhaustive lanes, no `large`")
     ap.add_argument("--out", default=str(ROOT / "figures"))
     ap.add_argument("--replot", action="store_true", help="redraw the figure from stability.json")
+    ap.add_argument("--multi-only", action="store_true",
+                    help="only the recall of each method on `multi_solution` (stability_multi.json)")
     args = parse_args(ap, argv)
     t0 = time.perf_counter()
+    if args.multi_only:
+        cj.enable_x64()
+        rec = multi_solution_recall(stress.stress_case("multi_solution", 64, 0), 64)
+        rec["seconds"] = time.perf_counter() - t0
+        write_json(pathlib.Path(args.out) / "stability_multi.json", rec)
+        print(multi_table(rec))
+        print(f"{rec['seconds']:.0f} s")
+        return
     if args.replot:  # figure only, from the JSON of an earlier run
         result = json.loads((pathlib.Path(args.out) / "stability.json").read_text())
         plot(result, pathlib.Path(args.out) / "stability.png")
@@ -363,6 +436,9 @@ def main(argv=None):
     print(kernel_table(result))
     print()
     print("totals:", json.dumps(result["totals"]))
+    if "recall" in result["categories"].get("multi_solution", {}):
+        print()
+        print(multi_table(result["categories"]["multi_solution"]["recall"]))
     print(f"{result['seconds']:.0f} s")
 
 

@@ -4,10 +4,12 @@
   (`refract`, eq. 3, the shading normal, Fresnel, the refraction-angle error, ...).
 - `planted`: random triangles and refracted paths with a known solution, seeded.
 - `checks`: `assert_solution_sane`, the checks every solver test runs.
+- `jittered_wave`: `jittered_heightfield`, issue 16's surface.
 """
 
 from . import oracle as oracle
 from .checks import assert_solution_sane as assert_solution_sane
+from .jittered_wave import jittered_heightfield as jittered_heightfield
 from .oracle import NumpyMesh as NumpyMesh
 from .oracle import flat_interface_irradiance as flat_interface_irradiance
 from .oracle import refraction_angle_error as refraction_angle_error
@@ -25,6 +27,7 @@ __all__ = [
     "PlantedPath",
     "assert_solution_sane",
     "flat_interface_irradiance",
+    "jittered_heightfield",
     "oracle",
     "partly_covered_floor",
     "path_endpoints",

@@ -33,6 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._precision import float_inputs
+from ..arguments import check_bool, check_points, check_real, real_array
 from ..barycentric import barycentric_coordinates, barycentric_point
 from ..features import check as check_features
 from ..geometry import dot, fresnel_transmittance, norm, safe_normalize
@@ -42,8 +44,10 @@ from ..objectives import path_vectors
 from ..prepared import PreparedSurface, prepare
 from ..solvers import solve
 from .differentials import ray_differential_D
+from .visibility import path_visible
 
 
+@float_inputs("V", "N", "P", "L", "ab", "receiver_normal", params=("eta", "intensity", "sigma_t"))
 @jax.jit
 def path_irradiance(
     V: Float[Array, "*batch 3 3"],
@@ -75,8 +79,20 @@ def path_irradiance(
     return jnp.where(ok, E, 0), ok
 
 
+def _lane_count(P: np.ndarray, L: np.ndarray) -> int:
+    """Lanes of `P`, `L` broadcast as `solve` does (`(3,)` is one lane)."""
+    try:
+        shape = np.broadcast_shapes(P.reshape(-1, 3).shape if P.ndim == 1 else P.shape,
+                                    L.reshape(-1, 3).shape if L.ndim == 1 else L.shape)
+    except ValueError:
+        raise ValueError(f"P {P.shape} and L {L.shape} do not broadcast") from None
+    if len(shape) != 2:
+        raise ValueError(f"P and L must broadcast to (N, 3), got {shape}")
+    return shape[0]
+
+
 def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
-    n_P = np.asarray(receiver_normal, np.float64)
+    n_P = real_array("receiver_normal", receiver_normal)
     if n_P.shape[-1:] != (3,):
         raise ValueError(f"receiver_normal must have shape (3,) or (N, 3), got {n_P.shape}")
     try:
@@ -91,7 +107,7 @@ def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
 
 def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: float = 1.333, receiver_normal,
                method: str = "walk", sigma_t: float = 0.0, all_paths: bool = False,
-               return_solution: bool = False, features="auto", **options):
+               visibility: bool = False, return_solution: bool = False, features="auto", **options):
     """Caustic irradiance (W/m^2) at receivers `P` from a point light at `L` through the surface.
 
     Args:
@@ -103,9 +119,14 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
         receiver_normal: `(3,)` or `(N, 3)` receiver normals (normalised here).
         method: the solver (`solve`'s `method`); `**options` go to it.
         sigma_t: Beer-Lambert extinction coefficient of the medium (1/m), `A = exp(-sigma_t d_P)`.
-        all_paths: sum over every refracted path (needs `method="exhaustive"`, float64).
-            Past the focal distance several paths reach one receiver; a single-path
-            solver returns one of them, so only this sum is the total irradiance there.
+        all_paths: sum over every refracted path. Past the focal distance several paths
+            reach one receiver; a single-path solver returns one of them, so only this
+            sum is the total irradiance there. `method="exhaustive"` (float64) sums every
+            path on the mesh (the certified reference); `method="walk"` sums every path
+            on the traced curve (`solve(..., solutions="all")`, `solvers/trace.py`).
+        visibility: drop paths whose segment `P -> M` or `M -> L` the surface itself
+            blocks (seed 001 §4; `transport/visibility.py`, docs/irradiance.md
+            "Visibility").
         return_solution: also return the solver's `Solution` (its `status` says why a
             lane has no path: none exists, or the solver failed to find it).
         features: `"auto"` (default), `None` (the general path) or a `SceneFeatures`:
@@ -117,24 +138,26 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     `(E, Solution)` with `return_solution`). Per path: `path_irradiance` (module
     docstring). Bad input raises `ValueError` before any solve.
     """
-    intensity_np = np.asarray(intensity, np.float64)
+    intensity_np = real_array("intensity", intensity)
     if not np.all(np.isfinite(intensity_np)) or np.any(intensity_np < 0):
-        raise ValueError("intensity must be finite and >= 0")
-    if not np.isfinite(sigma_t) or sigma_t < 0:
-        raise ValueError(f"sigma_t must be finite and >= 0, got {sigma_t}")
+        raise ValueError(f"intensity must be finite and >= 0 (W/sr), got {intensity!r}")
+    sigma_t = check_real("sigma_t", sigma_t, 0)
+    all_paths, return_solution = check_bool("all_paths", all_paths), check_bool("return_solution", return_solution)
     check_features(features)
-    if all_paths and method != "exhaustive":
-        raise ValueError("all_paths=True sums every solution: it needs method='exhaustive'")
-    P_np = np.asarray(P)
-    n = int(np.prod(P_np.shape[:-1])) if P_np.ndim > 1 else 1
+    if all_paths and method not in ("exhaustive", "walk", "trace"):
+        raise ValueError("all_paths=True sums every solution: it needs method='exhaustive' (every path "
+                         "on the mesh) or 'walk' (every path on the traced curve)")
+    if not isinstance(visibility, bool | np.bool_):
+        raise ValueError(f"visibility must be True or False, got {visibility!r}")
+    prep = prepare(mesh)
+    mesh, dtype = prep.mesh, prep.dtype
+    n = _lane_count(check_points("P", P, dtype), check_points("L", L, dtype))
     n_P = _check_receiver_normal(receiver_normal, n)
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
-    prep = prepare(mesh)
-    mesh, dtype = prep.mesh, prep.dtype
     if all_paths:
-        res = solve(mesh, P, L, eta=eta, method="exhaustive", return_all=True, **options)
-        E = _sum_all_paths(mesh, res, P, L, eta, intensity_np, n_P, sigma_t)
+        res = solve(mesh, P, L, eta=eta, method=method, solutions="all", **options)
+        E = _sum_all_paths(mesh, res, P, L, eta, intensity_np, n_P, sigma_t, visibility)
         return (E, res.solution) if return_solution else E
     feats = prep.features if isinstance(features, str) else features
     sol = solve(prep, P, L, eta=eta, method=method, features=feats, **options)
@@ -142,12 +165,24 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     L_b = jnp.broadcast_to(jnp.asarray(L, dtype).reshape(-1, 3), (n, 3))
     if feats is not None and feats.compact_lanes:
         E = _found_lanes_irradiance(mesh, sol, P_b, L_b, eta, intensity_np, n_P, sigma_t)
-        return (E, sol) if return_solution else E
-    V, N = mesh.triangle(sol.triangle)
-    E, _ = path_irradiance(V, N, P_b, L_b, sol.barycentric, eta, jnp.asarray(intensity_np, dtype),
-                           jnp.asarray(n_P, dtype), sigma_t)
-    E = jnp.where(sol.found, E, 0)
+    else:
+        V, N = mesh.triangle(sol.triangle)
+        E, _ = path_irradiance(V, N, P_b, L_b, sol.barycentric, eta, jnp.asarray(intensity_np, dtype),
+                               jnp.asarray(n_P, dtype), sigma_t)
+        E = jnp.where(sol.found, E, 0)
+    if visibility:
+        E = _visible_only(prep, E, sol.found, P_b, sol.point, L_b)
     return (E, sol) if return_solution else E
+
+
+def _visible_only(prep, E, found, P, M, L):
+    """`E` with the found lanes whose path the surface blocks set to 0 (only those tested)."""
+    idx = np.flatnonzero(np.asarray(found))
+    if idx.size == 0:
+        return E
+    g = jnp.asarray(idx)
+    blocked = ~path_visible(prep, P[g], M[g], L[g])
+    return E.at[g[blocked]].set(0) if blocked.any() else E
 
 
 def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
@@ -170,8 +205,9 @@ def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
     return scatter_lanes(E, g, real, E_g)
 
 
-def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t):
-    """Sum `path_irradiance` over every solution of an `ExhaustiveSolution` (float64)."""
+def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t, visibility: bool = False):
+    """Sum `path_irradiance` over every solution of an `ExhaustiveSolution` (only the visible
+    ones with `visibility`)."""
     pts, tris, count = np.asarray(res.all_points), np.asarray(res.all_triangles), np.asarray(res.count)
     n, width = tris.shape
     V, N = mesh.triangle(jnp.asarray(tris))
@@ -182,4 +218,8 @@ def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t):
     I_b = jnp.broadcast_to(jnp.asarray(intensity, mesh.dtype).reshape(-1, 1), (n, width))
     E, _ = path_irradiance(V, N, P_b, L_b, ab, eta, I_b, jnp.asarray(n_P)[:, None, :], sigma_t)
     used = np.arange(width)[None] < count[:, None]
+    if visibility and used.any():
+        lane, k = np.nonzero(used)
+        visible = path_visible(mesh, P_b[lane, k], jnp.asarray(pts[lane, k], mesh.dtype), L_b[lane, k])
+        used[lane[~visible], k[~visible]] = False
     return jnp.sum(jnp.where(jnp.asarray(used), E, 0), axis=1)

@@ -1,0 +1,185 @@
+"""Specular manifold sampling (SMS) irradiance estimators on the testbed's Newton solver:
+the comparison seed 001 makes in §5 (Fig. 7-8) against Zeltner et al. 2020.
+
+The caustic irradiance at a receiver is a sum over every refracted path,
+`E(P) = sum_k E_k` with `E_k` = `path_irradiance` at refraction point `M_k` (seed 001
+eq. 25 with MATH.md §6's factors). A Newton solve (`caustics_jax.Newton`, the MNEE/SMS
+baseline) started at a random point of the surface converges to one solution `M_k` with
+an unknown probability `p_k` (its basin's share of the surface area), or fails. SMS
+(Zeltner et al. 2020, "Specular manifold sampling for rendering high-frequency caustics
+and glints", §4.3 and §5) turns that into estimators of `E`:
+
+- **biased** (`sms_biased`): `k` solves from independent random starts; the distinct
+  solutions found are summed, each once. Solutions with small basins are missed with
+  probability `(1 - p_k)^k`: the estimate is low, and converges as `k` grows.
+- **unbiased** (`sms_unbiased`): one solve gives `M_k` (with probability `p_k`); then
+  Bernoulli trials, more solves from fresh random starts until `M_k` is found again: the
+  number of trials `T` is geometric with mean `1 / p_k`, so `E_k T` has expectation
+  `sum_k p_k E_k / p_k = E`. As in Mitsuba 3's SMS (`manifold_ss.cpp`), the count starts at
+  1 and grows by one per trial that misses, and a lane that reaches `max_trials` gets
+  weight 0 (a bias of at most `sum_k E_k (1 - p_k)^max_trials`).
+
+Random starts are uniform over the surface area (face by area, uniform barycentrics),
+as Mitsuba 3's implementation samples them ("uniformly samples on the surface of the
+shape"). Solutions count as "the same" within `same_radius` (m). A Newton point counts
+only where the refracted ray points towards `L` (`objectives.bracket_objective` status
+OK): the half-vector constraint also vanishes on non-physical configurations.
+
+Both are seeded (`seed`), vectorised over receivers, and return the number of Newton
+solves each receiver used, the cost they compare by.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..mesh import SurfaceMesh
+from ..objectives import ObjectiveStatus, bracket_objective
+from ..prepared import PreparedSurface, prepare
+from ..solvers import solve
+from ..start_points import StartPoint
+from .contribution import path_irradiance
+
+
+class EstimatorResult(NamedTuple):
+    """An irradiance estimate per receiver.
+
+    Attributes:
+        irradiance: `(N,)` the estimate (W/m^2).
+        solves: `(N,)` Newton solves spent on the receiver.
+        paths: `(N,)` biased: distinct solutions summed; unbiased: the Bernoulli trial
+            count `T` (the estimated `1 / p_k`; 0 where the first solve failed or the cap
+            was reached).
+    """
+
+    irradiance: np.ndarray
+    solves: np.ndarray
+    paths: np.ndarray
+
+
+def surface_starts(mesh: SurfaceMesh, n: int, rng: np.random.Generator) -> StartPoint:
+    """`n` start points uniform over the surface area: a face with probability proportional
+    to its area, then `a = sqrt(u1) (1 - u2)`, `b = sqrt(u1) u2` (uniform in the triangle,
+    seed 001 eq. 3 coordinates)."""
+    V = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)]
+    area = np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=-1) / 2
+    face = rng.choice(len(area), size=n, p=area / area.sum())
+    u1, u2 = rng.random(n), rng.random(n)
+    r = np.sqrt(u1)
+    ab = np.stack([r * (1 - u2), r * u2], -1)
+    return StartPoint(jnp.asarray(face, jnp.int32), jnp.asarray(ab, mesh.dtype), jnp.ones(n, bool))
+
+
+@jax.jit
+def _forward(mesh, face, ab, P, L, eta):
+    """True where the point refracts towards `L` (status OK: not TIR, not backward)."""
+    V, N = mesh.triangle(face)
+    _, st, _ = jax.vmap(lambda v, n_, p, l, x: bracket_objective(v, n_, p, l, x[None], eta))(V, N, P, L, ab)
+    return st[:, 0] == ObjectiveStatus.OK
+
+
+def _newton_from(prep: PreparedSurface, P, L, eta, start: StartPoint, options):
+    """One Newton solve per lane from `start`; `(found, point, face, ab)` numpy, `found` only
+    for forward refraction points."""
+    sol = solve(prep, P, L, eta=eta, method="newton", start=tuple(start), **options)
+    face, ab = sol.triangle, sol.barycentric
+    found = np.asarray(sol.found) & np.asarray(_forward(prep.mesh, jnp.maximum(face, 0), ab, P, L, eta))
+    return found, np.asarray(sol.point, np.float64), np.asarray(face), np.asarray(ab)
+
+
+def _path_irradiance(mesh, face, ab, P, L, eta, intensity, n_P, sigma_t):
+    V, N = mesh.triangle(jnp.asarray(face))
+    E, _ = path_irradiance(V, N, P, L, jnp.asarray(ab, mesh.dtype), eta, jnp.asarray(intensity, mesh.dtype),
+                           jnp.asarray(n_P, mesh.dtype), sigma_t)
+    return np.asarray(E, np.float64)
+
+
+def _inputs(mesh, P, L, intensity, receiver_normal):
+    prep = prepare(mesh)
+    dtype = prep.dtype
+    P = jnp.asarray(np.asarray(P), dtype).reshape(-1, 3)
+    L = jnp.broadcast_to(jnp.asarray(np.asarray(L), dtype).reshape(-1, 3), P.shape)
+    n = P.shape[0]
+    n_P = np.broadcast_to(np.asarray(receiver_normal, np.float64), (n, 3))
+    if not np.all(np.isfinite(n_P)) or np.any(np.linalg.norm(n_P, axis=-1) == 0):
+        raise ValueError("receiver_normal must be finite and non-zero")
+    I_e = np.broadcast_to(np.asarray(intensity, np.float64), (n,))
+    if not np.all(np.isfinite(I_e)) or np.any(I_e < 0):
+        raise ValueError("intensity must be finite and >= 0")
+    return prep, P, L, n, n_P, I_e
+
+
+def _check_count(name, value, lo):
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, intensity,
+               receiver_normal, eta: float = 1.333, sigma_t: float = 0.0, same_radius: float = 1e-6,
+               **newton_options) -> EstimatorResult:
+    """Biased SMS: `k` Newton solves per receiver from area-uniform random starts, the
+    distinct forward solutions summed (module docstring). `newton_options` go to
+    `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...)."""
+    k = _check_count("k", k, 1)
+    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal)
+    rng = np.random.default_rng(seed)
+    lane = np.repeat(np.arange(n), k)
+    idx = jnp.asarray(lane)
+    found, M, face, ab = _newton_from(prep, P[idx], L[idx], eta, surface_starts(prep.mesh, n * k, rng),
+                                      newton_options)
+    E = np.zeros(n)
+    paths = np.zeros(n, np.int64)
+    hit = np.nonzero(found)[0]
+    if hit.size:
+        E_path = _path_irradiance(prep.mesh, face[hit], ab[hit], P[idx[hit]], L[idx[hit]], eta, I_e[lane[hit]],
+                                  n_P[lane[hit]], sigma_t)
+        owner, pts = lane[hit], M[hit]
+        # Distinct per receiver: a solution within same_radius of an earlier one is the same.
+        order = np.lexsort((pts[:, 0], owner))
+        keep = np.ones(len(order), bool)
+        o, p = owner[order], pts[order]
+        for shift in range(1, k):
+            same = np.zeros(len(o), bool)
+            same[shift:] = (o[shift:] == o[:-shift]) & (np.linalg.norm(p[shift:] - p[:-shift], axis=-1) <= same_radius)
+            keep &= ~same
+        np.add.at(E, o[keep], E_path[order][keep])
+        np.add.at(paths, o[keep], 1)
+    return EstimatorResult(E, np.full(n, k, np.int64), paths)
+
+
+def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intensity, receiver_normal,
+                 eta: float = 1.333, sigma_t: float = 0.0, max_trials: int = 1000, same_radius: float = 1e-6,
+                 **newton_options) -> EstimatorResult:
+    """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
+    path's irradiance times the trial count (module docstring)."""
+    max_trials = _check_count("max_trials", max_trials, 1)
+    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal)
+    rng = np.random.default_rng(seed)
+    found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton_options)
+    solves = np.ones(n, np.int64)
+    trials = np.where(found, 1, 0).astype(np.int64)
+    E_path = np.zeros(n)
+    hit = np.nonzero(found)[0]
+    if hit.size:
+        g = jnp.asarray(hit)
+        E_path[hit] = _path_irradiance(prep.mesh, face[hit], ab[hit], P[g], L[g], eta, I_e[hit], n_P[hit], sigma_t)
+    active = found.copy()
+    while active.any():
+        idx = np.nonzero(active)[0]
+        g = jnp.asarray(idx)
+        f_t, M_t, _, _ = _newton_from(prep, P[g], L[g], eta, surface_starts(prep.mesh, idx.size, rng),
+                                      newton_options)
+        solves[idx] += 1
+        again = f_t & (np.linalg.norm(M_t - M[idx], axis=-1) <= same_radius)
+        active[idx[again]] = False
+        missed = idx[~again]
+        trials[missed] += 1
+        capped = missed[trials[missed] > max_trials]
+        trials[capped] = 0
+        active[capped] = False
+    return EstimatorResult(E_path * trials, solves, trials)

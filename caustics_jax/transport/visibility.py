@@ -1,0 +1,49 @@
+"""Visibility of a refracted path through the surface itself (seed 001 §4).
+
+Seed 001 §4 traces a ray from the refraction point `M` to the light `L` (and from the
+receiver `P` to `M`) to discard paths the scene blocks. Here the only occluder is the water
+surface: on steep waves, or under grazing light, the segment `M -> L` can leave the water
+at `M` and cross a wave crest before reaching the light, and `P -> M` can cross the
+surface from below before `M`. Such a path satisfies Snell's law at `M` yet carries no
+light.
+
+A path is visible when neither segment crosses the surface anywhere but at `M`: each is
+tested with the start-point query (`start_points.first_crossing`, the first crossing of a
+segment with the surface, on the prepared acceleration structure), the end at `M` pulled
+back by a relative `eps` along the segment so that `M`'s own face (and its neighbours,
+when `M` lies on an edge) is not reported (`eps = 1e-6` in float64, `1e-3` in float32:
+far above the crossing test's rounding bound). A crest closer to `M` than `eps` times the
+segment's length is not seen.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..prepared import PreparedSurface, prepare
+from ..start_points import first_crossing
+
+
+def visibility_eps(dtype) -> float:
+    """Relative pull-back of `M` along each segment (module docstring)."""
+    return 1e-6 if jnp.dtype(dtype) == jnp.float64 else 1e-3
+
+
+def path_visible(mesh, P, M, L) -> np.ndarray:
+    """`(n,)` True where neither `P -> M` nor `M -> L` crosses the surface except at `M`.
+
+    `P`, `M`, `L`: `(n, 3)` arrays (the mesh's dtype). One query of `2 n` segments.
+    """
+    prep: PreparedSurface = prepare(mesh)
+    dtype = prep.dtype
+    P, M, L = (jnp.asarray(x, dtype).reshape(-1, 3) for x in (P, M, L))
+    n = P.shape[0]
+    if n == 0:
+        return np.zeros(0, bool)
+    eps = visibility_eps(dtype)
+    A = jnp.concatenate([P, M + eps * (L - M)])
+    B = jnp.concatenate([M + eps * (P - M), L])
+    _, _, hit = first_crossing(prep.mesh, A, B, bvh=prep.bvh)
+    hit = np.asarray(hit)
+    return ~(hit[:n] | hit[n:])
