@@ -33,7 +33,7 @@ from .objectives import (
     signed_sine_and_status,
 )
 from .prepared import PreparedSurface, prepare
-from .solvers import Exhaustive, ExhaustiveSolution, Newton, Solution, Status, Walk, solve
+from .solvers import Exhaustive, ExhaustiveSolution, Newton, Solution, Status, Trace, Walk, solve
 from .start_points import start_points
 from .transport import (
     ReceiverGrid,
@@ -46,6 +46,8 @@ from .transport import (
     photon_differential_irradiance,
     photon_irradiance,
     ray_differential_D,
+    sms_biased,
+    sms_unbiased,
     texel_jacobian,
 )
 
@@ -54,6 +56,9 @@ __all__ = [
     "ExhaustiveSolution",
     "Newton",
     "PreparedSurface",
+    "Trace",
+    "sms_biased",
+    "sms_unbiased",
     "Walk",
     "__version__",
     "kernels",

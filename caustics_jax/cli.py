@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -44,7 +45,7 @@ def format_table(report: dict) -> str:
             f"{_fmt(pos.get('median')):>10}{_fmt(pos.get('p99')):>10}{_fmt(pos.get('max')):>10}"
             f"{_fmt(ang['median']):>10}{_fmt(ang['p99']):>10}{_fmt(ang['max']):>10}"
             f"{r['iterations']['median']:>7.0f}{r['iterations']['p99']:>7.0f}"
-            f"{r['compile_s']:>8.1f}s{r['solves_per_s']:>11.0f}")
+            f"{r['compile_s']:>8.1f}{'c' if r.get('compile_cached') else 's'}{r['solves_per_s']:>11.0f}")
     ref = report["reference"]
     lines.append("")
     if ref:
@@ -52,7 +53,8 @@ def format_table(report: dict) -> str:
                      f"{ref['lanes']} lanes (solutions per lane: {ref['solutions_per_lane']}); "
                      "@M0: returned the solution nearest M0")
     lines.append("angle error (rad): refraction-angle error of every found lane, float64 check; "
-                 "compile: first call minus a steady call")
+                 "compile: first call minus a steady call (c: loaded from the persistent compilation "
+                 "cache, CAUSTICS_JAX_COMPILATION_CACHE=0 to measure it)")
     for q in cmp.ratios(report):
         lines.append(f"[{q['dtype']}] walk / best Newton ({q['best_newton']}) throughput ratio: "
                      f"{q['speed_ratio']:.2f}")
@@ -108,11 +110,76 @@ def plot(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def check_output_file(flag: str, path) -> None:
+    """Refuse, before any work, an output file that could not be written after the run: a
+    directory, a path below a file, or one in a directory that cannot be written
+    (nothing is created here). `None` or "none": no file."""
+    if path is None or path == "none":
+        return
+    p = Path(path).expanduser()
+    if p.is_dir():
+        raise ValueError(f"{flag} {path} is a directory; give a file path, e.g. {p / 'out'}")
+    blocker = next((q for q in p.parents if q.exists() and not q.is_dir()), None)
+    if blocker is not None:
+        raise ValueError(f"{flag} {path}: {blocker} is a file, not a directory")
+    if p.exists():
+        ok, where = os.access(p, os.W_OK), p
+    else:  # created after the run, with its missing parents, in the nearest existing directory
+        where = next(q for q in p.parents if q.exists())
+        ok = os.access(where, os.W_OK | os.X_OK)
+    if not ok:
+        raise ValueError(f"{flag} {path} is not writable ({where} does not allow writing)")
+
+
+def _check_figure_format(path) -> None:
+    if path is None or path == "none":
+        return
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in kinds:
+        raise ValueError(f"--figure {path}: the file type is set by the suffix, one of "
+                         f"{', '.join('.' + k for k in sorted(kinds))}; got {'.' + suffix if suffix else 'none'}")
+
+
+#: Solver lanes per second assumed for the run-time warning (make demo on 2 CPU cores:
+#: 40k-58k solves/s, docs/solvers.md); compile time and the reference come on top.
+SOLVES_PER_S = 40_000
+#: Warn when the solver time alone is expected above this (s).
+LONG_RUN_S = 600
+
+
+def warn_if_long_compare(cfg) -> str | None:
+    """The warning line for a comparison expected to run long (None when it will not)."""
+    solves = cfg.expected_solves()
+    seconds = solves / SOLVES_PER_S
+    if seconds <= LONG_RUN_S:
+        return None
+    lane_bytes = cfg.n * (6 * 8 + 14 * 8)  # P, L (float64) and one Solution's fields per lane
+    return (f"warning: --n {cfg.n}: about {solves:.3g} solver lanes ({len(cfg.configs)} configuration(s) x "
+            f"{len(cfg.dtypes)} dtype(s) x {cfg.repeats + 1} timed calls, plus the sweep), about "
+            f"{seconds / 60:.0f} min of solver time at ~{SOLVES_PER_S // 1000}k solves/s on a 2-core CPU "
+            f"(compile and reference on top) and {lane_bytes / 2**20:.0f} MiB of lanes per configuration; "
+            "Ctrl-C stops it")
+
+
 def _compare(args) -> int:
     cfg = cmp.CompareConfig(
         scene=args.scene, n_triangles=args.triangles, n=args.n, dtypes=tuple(args.dtype),
         configs=tuple(args.configs), ref_n=args.ref_n, sweep_n=args.sweep_n,
         sweep=not args.no_sweep, repeats=args.repeats, eta=args.eta, seed=args.seed)
+    # Everything a user can get wrong is refused here, before the run (minutes), not after it.
+    cfg.validate()
+    check_output_file("--json", args.json)
+    check_output_file("--figure", args.figure)
+    _check_figure_format(args.figure)
+    warning = warn_if_long_compare(cfg)
+    if warning:
+        print(f"caustics-jax {args.command}: {warning}", file=sys.stderr)
     try:
         report = cmp.run(cfg)
     except ValueError as exc:
@@ -163,6 +230,35 @@ def _selection(named, everything) -> list[str] | None:
     return list(everything) if named == ["all"] else named
 
 
+#: Largest std430 binary per kernel: a Vulkan storage buffer addresses at most 2^32 bytes
+#: (`maxStorageBufferRange` is a uint32), so a larger `<kernel>.bin` could not be bound.
+MAX_BINARY_BYTES = 2**32 - 1
+#: Export records per second assumed for the warning (measured 2-5k/s on 2 loaded CPU cores).
+EXPORT_RECORDS_PER_S = 2_000
+#: Warn when an export is expected to write more than this or run longer than `LONG_RUN_S`.
+LARGE_EXPORT_BYTES = 2**28
+
+
+def export_size_warning(kernels, count: int, lanes: int, n_scenes: int) -> str | None:
+    """Refuse (`ValueError`) a `--count` whose binary no storage buffer can hold; return a
+    warning line with the expected size and time when the export is large, else None."""
+    from .export import KERNELS
+    from .export.records import layout
+
+    strides = {k: layout(KERNELS[k].fields)[1] for k in kernels}
+    too_big = [k for k, stride in strides.items() if stride * count > MAX_BINARY_BYTES]
+    if too_big:
+        raise ValueError(f"--count {count} makes {too_big[0]}.bin {strides[too_big[0]] * count / 2**30:.1f} GiB, above "
+                         f"the 4 GiB a Vulkan storage buffer can address; use --count <= "
+                         f"{MAX_BINARY_BYTES // max(strides.values())}")
+    size = sum(strides.values()) * count
+    seconds = len(kernels) * count / EXPORT_RECORDS_PER_S + n_scenes * lanes / SOLVES_PER_S
+    if size <= LARGE_EXPORT_BYTES and seconds <= LONG_RUN_S:
+        return None
+    return (f"warning: --count {count}: about {size / 2**20:.0f} MiB of binaries for {len(kernels)} kernel(s) and "
+            f"about {seconds / 60:.0f} min at ~{EXPORT_RECORDS_PER_S} records/s per kernel on a 2-core CPU")
+
+
 def _export(args) -> int:
     from . import export
 
@@ -171,6 +267,10 @@ def _export(args) -> int:
     if kernels is None and scenes is None:  # nothing named: everything
         kernels, scenes = list(export.KERNELS), list(export.SCENES)
     kernels, scenes = kernels or [], scenes or []  # one group named: only that one
+    if args.count >= 4 and all(k in export.KERNELS for k in kernels):  # else export() says what is wrong
+        warning = export_size_warning(kernels, args.count, args.lanes, len(scenes))
+        if warning:
+            print(f"caustics-jax export: {warning}", file=sys.stderr)
     try:
         written = export.export(args.out, kernels=kernels, count=args.count, seed=args.seed, scenes=scenes,
                                 lanes=args.lanes)
@@ -206,8 +306,15 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (the usage itself is what `--help` is for)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="caustics-jax", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="caustics-jax", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_compare_args(sub.add_parser(
@@ -223,12 +330,24 @@ def main(argv=None) -> int:
     conf.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL")
     conf.add_argument("--scenes", nargs="+", default=None, metavar="SCENE")
     conf.add_argument("--json", default=None, help="write the per-kernel and per-scene reports as JSON here")
-    args = parser.parse_args(argv)
-    if args.command == "export":
-        return _export(args)
-    if args.command == "conformance":
-        return _conformance(args)
-    return _compare(args)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # usage errors (one line, `_Parser.error`) return 2; --help, --version exit 0
+        if not exc.code:
+            raise
+        return exc.code if isinstance(exc.code, int) else 2
+    run = {"export": _export, "conformance": _conformance}.get(args.command, _compare)
+    # A user error is one line on stderr and exit status 2, never a traceback
+    # (docs/input_contract.md "Command line"); files that cannot be written: status 1.
+    try:
+        return run(args)
+    except ValueError as exc:
+        print(f"caustics-jax {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"caustics-jax {args.command}: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "),
+              file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

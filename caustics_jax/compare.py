@@ -34,8 +34,10 @@ import numpy as np
 
 from . import scenes
 from ._precision import precision
+from .arguments import check_bool, check_eta, check_int
 from .progress import progress
 from .reporting import log, stats
+from .scenes import MAX_TRIANGLES
 from .solvers import solve
 from .solvers.walk import default_tol
 from .start_points import start_points
@@ -53,8 +55,17 @@ CONFIGS: dict[str, tuple[str, dict]] = {
     "lm-hv": ("newton", {"solver": "levenberg_marquardt", "constraint": "half_vector"}),
     "dogleg-hv": ("newton", {"solver": "dogleg", "constraint": "half_vector"}),
     "newton-hv-sms4": ("newton", {"solver": "newton", "constraint": "half_vector", "n_starts": 4}),
+    # One Newton step, then project back onto the surface, as Cycles' MNEE and Mitsuba's SMS
+    # step (`Newton(stepping="one_step")`): the strongest Newton baseline on the default pool
+    # (docs/solvers.md "Throughput and the machine's limit").
+    "newton-hv-step": ("newton", {"stepping": "one_step", "constraint": "half_vector"}),
+    "newton-ad-step": ("newton", {"stepping": "one_step", "constraint": "angle_difference"}),
+    "newton-hv-step-gentle": ("newton", {"stepping": "one_step", "constraint": "half_vector", "initial_step": 0.1}),
+    # The previous lane scheduler (fixed chunks of 256 lanes, each until its slowest lane).
+    "walk-chunked": ("walk", {"scheduler": "chunked"}),
+    "newton-hv-chunked": ("newton", {"solver": "newton", "constraint": "half_vector", "scheduler": "chunked"}),
 }
-DEFAULT_CONFIGS = ("walk", "newton-hv", "newton-ad", "lm-hv")
+DEFAULT_CONFIGS = ("walk", "newton-hv-step", "newton-hv", "newton-ad", "lm-hv")
 SCENES: dict[str, Callable] = {
     "wavy": lambda n, dt: scenes.wavy_pool(n, dtype=dt),
     "wavy_steep": lambda n, dt: scenes.wavy_pool(n, amplitude=0.08, dtype=dt),
@@ -134,6 +145,11 @@ SWEEP_TOLS = {"float32": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
               "float64": (1e-2, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12)}
 
 
+#: Largest `n` (and `ref_n`, `sweep_n`): 2^26 lanes hold 3 GiB of float64 receivers and
+#: lights before any solver state; above it a run is a typo, refused before any work.
+MAX_LANES = 2**26
+
+
 @dataclasses.dataclass
 class CompareConfig:
     """What to compare. `n` receivers on a regular floor grid of the scene, lights as the scene."""
@@ -152,6 +168,22 @@ class CompareConfig:
     keep_lanes: bool = False  # per-lane statuses and receivers in the report (floor maps of failures)
 
     def validate(self) -> None:
+        """Raise `ValueError` naming the first bad field and its valid range (before any work)."""
+        if not isinstance(self.scene, str):
+            raise ValueError(f"scene must be a scene name or a mesh file path (str), got {self.scene!r}")
+        for name in ("dtypes", "configs"):
+            value = getattr(self, name)
+            if not isinstance(value, tuple | list) or not value or not all(isinstance(v, str) for v in value):
+                raise ValueError(f"{name} must be a non-empty tuple of names, got {value!r}")
+        check_int("n", self.n, 1, MAX_LANES)
+        check_int("n_triangles", self.n_triangles, 8, MAX_TRIANGLES)
+        check_int("ref_n", self.ref_n, 0, MAX_LANES)
+        check_int("sweep_n", self.sweep_n, 1, MAX_LANES)
+        check_int("repeats", self.repeats, 1, 1000)
+        check_int("seed", self.seed, 0, 2**32 - 2)  # the reference subset draws with seed + 1
+        check_eta(self.eta)
+        check_bool("sweep", self.sweep)
+        check_bool("keep_lanes", self.keep_lanes)
         if not is_scene_path(self.scene) and self.scene not in SCENES:
             raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
                              f"({', '.join(MESH_SUFFIXES)}), got {self.scene!r}")
@@ -163,10 +195,16 @@ class CompareConfig:
         bad = [d for d in self.dtypes if d not in ("float32", "float64")]
         if bad:
             raise ValueError(f"dtypes must be float32 and/or float64, got {bad}")
-        if self.n < 1 or self.ref_n < 0 or self.sweep_n < 1 or self.repeats < 1:
-            raise ValueError("n, sweep_n and repeats must be >= 1 and ref_n >= 0")
-        if self.n_triangles < 8:
-            raise ValueError(f"n_triangles must be >= 8, got {self.n_triangles}")
+
+    def expected_solves(self) -> int:
+        """Solver lanes the run will compute: `n` per configuration and dtype, timed
+        `repeats + 1` times, plus the sweep (the figure's points)."""
+        total = 0
+        for dtype in self.dtypes:
+            total += self.n * (self.repeats + 1)
+            if self.sweep:
+                total += min(self.sweep_n, self.n) * (1 + max(1, self.repeats - 1)) * len(SWEEP_TOLS.get(dtype, ()))
+        return len(self.configs) * total
 
 
 def scene_arrays(cfg: CompareConfig):
@@ -185,16 +223,29 @@ def scene_arrays(cfg: CompareConfig):
 
 
 def _timed(fn, repeats: int):
-    t = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    first = time.perf_counter() - t
+    """`(out, compile_s, steady_s, cached)`: compile time = first call minus the median
+    steady call; `cached` says the first call loaded programs from JAX's persistent
+    compilation cache (`caustics_jax.compilation`), so `compile_s` is a load time then."""
+    hits = []
+
+    def on_event(event, **_):
+        if event == "/jax/compilation_cache/cache_hits":
+            hits.append(event)
+
+    jax.monitoring.register_event_listener(on_event)
+    try:
+        t = time.perf_counter()
+        out = jax.block_until_ready(fn())
+        first = time.perf_counter() - t
+    finally:
+        jax.monitoring.unregister_event_listener(on_event)
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
         jax.block_until_ready(fn())
         times.append(time.perf_counter() - t)
     steady = float(np.median(times))
-    return out, max(first - steady, 0.0), steady
+    return out, max(first - steady, 0.0), steady, bool(hits)
 
 
 def _errors(sol, ref_mesh, P, L, eta, ref):
@@ -249,7 +300,7 @@ def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps, bar):
             log(f"[{dtype}] {name}: {cfg.n} lanes ...")
             t0 = time.perf_counter()
             try:
-                sol, compile_s, steady = _timed(
+                sol, compile_s, steady, cached = _timed(
                     lambda m=method, o=opts: solve(mesh, Pd, Ld, eta=cfg.eta, method=m, **o),
                     cfg.repeats)
             except ValueError as exc:  # e.g. a solver unavailable in this dtype
@@ -267,7 +318,7 @@ def _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps, bar):
                 "position_error_m": stats(err["position"]) if "position" in err else None,
                 "iterations": {"median": float(np.median(it)) if it.size else float("nan"),
                                "p99": float(np.quantile(it, 0.99)) if it.size else float("nan")},
-                "compile_s": compile_s, "seconds": steady, "solves_per_s": cfg.n / steady,
+                "compile_s": compile_s, "compile_cached": cached, "seconds": steady, "solves_per_s": cfg.n / steady,
                 "status": sol.summary(), "tol": opts.get("tol", default_tol(dtype)),
             }
             if cfg.keep_lanes:
@@ -286,7 +337,7 @@ def _sweep(cfg, name, method, opts, dtype, mesh, Pd, Ld, ref_mesh, P, L):
     idx = np.linspace(0, len(P) - 1, n).astype(int)
     out = []
     for tol in SWEEP_TOLS[dtype]:
-        sol, _, steady = _timed(
+        sol, _, steady, _ = _timed(
             lambda t=tol: solve(mesh, Pd[idx], Ld[idx], eta=cfg.eta, method=method,
                                 **{**opts, "tol": t}), max(1, cfg.repeats - 1))
         err = _errors(sol, ref_mesh, P[idx], L[idx], cfg.eta, None)

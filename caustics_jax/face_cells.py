@@ -201,6 +201,14 @@ def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, wid
     margin = 1 if widen else -1
     # (Widened, the window reaches past s_hi by the rounding of s: keep the slab too.)
     s_end = jnp.asarray(s_hi + 64 * float(eps) * (1 + abs(s_hi)) if widen else s_hi, dtype)
+    # Height range of each cell's faces (traced heights: one gather of the cell table per
+    # call), for skipping the cells a segment passes entirely above or below.
+    face_z = z[mesh_faces]
+    listed = cells.faces >= 0
+    listed_face = jnp.maximum(cells.faces, 0)
+    cell_lo = jnp.min(jnp.where(listed, face_z.min(1)[listed_face], jnp.inf), axis=1)
+    cell_hi = jnp.max(jnp.where(listed, face_z.max(1)[listed_face], -jnp.inf), axis=1)
+    z_scale = jnp.maximum(jnp.abs(z_lo), jnp.abs(z_hi))
 
     def lane(P, Q, exclude):
         d = Q - P
@@ -216,6 +224,29 @@ def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, wid
             x = lines[jnp.clip(i + (step[k] > 0), 0, lines.shape[0] - 1)]
             dk = jnp.where(moving, d[(u, v)[k]], 1)
             return jnp.where(moving, (x - P[(u, v)[k]]) / dk, jnp.inf)
+
+        # Skip ahead (cheap steps, no face tests) to the first cell whose height range the
+        # segment meets while inside it. Padded by 256 ulps of the magnitudes, far more than
+        # the rounding of z at the walls: a cell holding a crossing is never skipped.
+        meet_pad = 256 * eps * (jnp.max(jnp.abs(P)) + jnp.max(jnp.abs(d)) + z_scale)
+
+        def skip(state):
+            i, j, s_enter, _, _ = state
+            s_u, s_v = wall(0, i, us), wall(1, j, vs)
+            s_leave = jnp.minimum(s_u, s_v)
+            z0, z1 = P[w] + s_enter * d[w], P[w] + jnp.minimum(s_leave, s_out) * d[w]
+            cell = j * nu + i
+            meets = (jnp.maximum(z0, z1) + meet_pad >= cell_lo[cell]) & (
+                jnp.minimum(z0, z1) - meet_pad <= cell_hi[cell])
+            along_u = s_u <= s_v
+            i_next = jnp.where(along_u, i + step[0], i)
+            j_next = jnp.where(along_u, j, j + step[1])
+            gone = (s_leave > s_out) | (i_next < 0) | (i_next >= nu) | (j_next < 0) | (j_next >= nv)
+            return (jnp.where(meets, i, jnp.clip(i_next, 0, nu - 1)), jnp.where(meets, j, jnp.clip(j_next, 0, nv - 1)),
+                    jnp.where(meets, s_enter, s_leave), meets | gone, ~meets & gone)  # fmt: skip
+
+        empty = s_in > s_out
+        i, j, _, _, missed = jax.lax.while_loop(lambda st: ~st[3], skip, (i, j, s_in, empty, empty))
 
         def cond(state):
             return ~state[3]
@@ -243,7 +274,7 @@ def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, wid
             return jnp.clip(i, 0, nu - 1), jnp.clip(j, 0, nv - 1), s_leave, done, best, face, ab, s_best
 
         inf = jnp.asarray(jnp.inf, dtype)
-        init = (i, j, s_in, s_in > s_out, inf, jnp.asarray(-1, jnp.int32), jnp.zeros(2, dtype), inf)
+        init = (i, j, s_in, missed, inf, jnp.asarray(-1, jnp.int32), jnp.zeros(2, dtype), inf)
         *_, face, ab, s_best = jax.lax.while_loop(cond, body, init)
         return face, ab, s_best
 

@@ -1,21 +1,37 @@
-"""Lane batching shared by the solvers and the transport layer: padding to size classes,
-chunked vmap, compaction of the lanes that need work, and scattering results back.
+"""Lane batching shared by the solvers and the transport layer: fixed-size blocks spread
+over every local device, the slot-pool scheduler, work on compacted lanes, chunked vmap,
+and scattering results back.
 
-A "lane" is one receiver/light pair. jit compiles once per shape, so batches are padded
-to a few size classes (`lane_bucket`) and meshes to power-of-two face and vertex counts
-(`padded_mesh`). Host work here is numpy index bookkeeping, done once per call, outside
-jit (DESIGN.md "Skipping what a scene does not need").
+A "lane" is one receiver/light pair. jit compiles once per shape, so the solvers see
+lanes only in blocks of a fixed size (`block_lanes` per device, `run_blocks`, the last
+block padded with lanes that need no work) and meshes padded to power-of-two face and
+vertex counts (`padded_mesh`): one compile per method, dtype and mesh size class,
+whatever the lane count. A block is split over all local devices (`on_devices`,
+`shard_map`, the mesh replicated); each device runs its own lanes.
+
+Inside a block, a vmapped `while_loop` runs until its slowest lane ends. `run_pool`
+avoids that waste: a fixed pool of slots (`pool_slots`, sized to the backend) steps the
+lanes in flight, and a slot whose lane ended takes the next unfinished lane from a queue,
+so every step advances `slots` live lanes until the queue is empty. Work that few lanes
+need (`map_where`) runs on the compacted lanes that need it, in chunks, so its cost is
+proportional to those lanes. `map_lanes` (fixed chunks, each until its slowest lane)
+is the previous scheduler, kept for comparison (`Walk(scheduler="chunked")`).
+
+Host work here is numpy index bookkeeping, done once per call, outside jit (DESIGN.md
+"Skipping what a scene does not need").
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .mesh import SurfaceMesh
 
@@ -107,3 +123,242 @@ def padded_mesh(mesh: SurfaceMesh) -> SurfaceMesh:
 def padded_index(idx: np.ndarray, size: int) -> np.ndarray:
     """`idx` padded with its first entry (0 when empty) to `size` (one compile per size class)."""
     return np.concatenate([idx, np.full(size - len(idx), idx[0] if len(idx) else 0, idx.dtype)])
+
+
+# --------------------------------------------------------------------------- slot pool
+
+
+def pool_slots(platform: str | None = None) -> int:
+    """Lanes in flight per device in `run_pool` (env `CAUSTICS_JAX_POOL_SLOTS`).
+
+    CPU: 256, the chunk width of `map_lanes`, so both schedulers run the same vmapped
+    step and give bit-identical results (XLA CPU vectorises wider steps differently:
+    1024 slots moved float32 points by up to 1.5e-4 of a barycentric unit, and ran
+    slower). GPU: 512 lanes per streaming multiprocessor (`core_count`; 65536 when the
+    backend does not report it), enough resident lanes to hide memory latency; TPU: 8192.
+    """
+    env = os.environ.get("CAUSTICS_JAX_POOL_SLOTS")
+    if env:
+        return int(env)
+    device = jax.local_devices()[0] if platform is None else None
+    platform = platform or device.platform
+    if platform in ("gpu", "cuda", "rocm"):
+        cores = getattr(device, "core_count", None) if device is not None else None
+        return 512 * int(cores) if cores else 65536
+    return 8192 if platform == "tpu" else 256
+
+
+def block_lanes(platform: str | None = None) -> int:
+    """Lanes per device in one call of a compiled solver (env `CAUSTICS_JAX_BLOCK_LANES`):
+    128 pools' worth (32768 on CPU), so the pool drains (its slowest lanes finish with
+    part of the slots idle) once per 128 pool-loads of lanes; padding lanes cost nothing
+    but their share of the block's O(lanes) bookkeeping."""
+    env = os.environ.get("CAUSTICS_JAX_BLOCK_LANES")
+    if env:
+        return int(env)
+    return 128 * pool_slots(platform)
+
+
+def _rows(tree, idx):
+    """Rows `idx` of every leaf (`idx` clipped into range: callers mask the rest)."""
+    n = jax.tree.leaves(tree)[0].shape[0]
+    return jax.tree.map(lambda x: x[jnp.clip(idx, 0, n - 1)], tree)
+
+
+def _select(mask, new, old):
+    """Per lane `new` where `mask` else `old`, for pytrees with a leading lane axis."""
+    return jax.tree.map(lambda a, b: jnp.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b), new, old)
+
+
+def run_pool(step, states, running, slots: int):
+    """Step every running lane until it ends, `slots` lanes at a time (inside jit).
+
+    `states`: a pytree of per-lane states with a leading lane axis `n`; `running` `(n,)`:
+    the lanes that need steps (the others are returned unchanged). `step(state) ->
+    (state, done)` advances one lane (vmapped over the slots). A slot whose lane is done
+    writes it back and takes the next running lane from the queue; the loop ends when the
+    queue is empty and every slot is idle. Each lane sees exactly the `step` calls it
+    would see alone, so the results are those of a per-lane `while_loop`; the vmapped
+    step runs on `slots` lanes in flight (idle slots only in the final drain), instead
+    of a chunk waiting for its slowest lane.
+    """
+    n = running.shape[0]
+    slots = min(slots, n)
+    queue = jnp.nonzero(running, size=n, fill_value=n)[0].astype(jnp.int32)  # n: none left
+    lane = queue[:slots]
+
+    def body(carry):
+        states, lane, slot, head = carry
+        slot, done = jax.vmap(step)(slot)
+        finished = (lane < n) & done
+        states = jax.tree.map(lambda x, s: x.at[jnp.where(finished, lane, n)].set(s, mode="drop"), states, slot)
+        pos = head + jnp.cumsum(finished, dtype=jnp.int32) - 1  # queue position of each refill
+        refill = jnp.where(pos < n, queue[jnp.clip(pos, 0, n - 1)], n)
+        lane = jnp.where(finished, refill, lane)
+        slot = _select(finished, _rows(states, lane), slot)
+        return states, lane, slot, head + jnp.sum(finished, dtype=jnp.int32)
+
+    carry = (states, lane, _rows(states, lane), jnp.int32(slots))
+    return jax.lax.while_loop(lambda c: jnp.any(c[1] < n), body, carry)[0]
+
+
+def run_pools(steps: tuple, route, states, slots: int):
+    """`run_pool` with one pool per kind of step: a lane runs in the pool its state routes
+    it to, so each step computes only its own branch (inside jit).
+
+    `steps[k](state) -> state` is the step of pool `k`; `route(state)` is the pool a lane
+    needs next (int32 in `[0, len(steps))`), or -1 once it is done. Each pool has `slots`
+    slots and a ring-buffer queue of the lanes routed to it; after every trip the lanes
+    whose route changed are written back and queued for their next pool (or leave when
+    done), and every pool refills its free slots from its queue. A pool without a busy
+    slot skips its step (`lax.cond`). A lane sees the same sequence of steps as in a
+    per-lane loop that branches on its state, so the results are those of that loop; a
+    branch that few lanes need costs only those lanes' slots.
+    """
+    n = jax.tree.leaves(states)[0].shape[0]
+    K = len(steps)
+    slots = min(slots, n)
+    first = jax.vmap(route)(states)
+    bufs, tails, lanes_ = [], [], []
+    for k in range(K):
+        members = first == k
+        bufs.append(jnp.nonzero(members, size=n, fill_value=n)[0].astype(jnp.int32))
+        tails.append(jnp.sum(members, dtype=jnp.int32))
+        lanes_.append(jnp.where(jnp.arange(slots) < tails[k], bufs[k][:slots], n))
+    heads = [jnp.minimum(jnp.int32(slots), t) for t in tails]
+    carry = (states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_),
+             tuple(_rows(states, lane) for lane in lanes_))
+
+    def cond(c):
+        _, _, heads, tails, lanes_, _ = c
+        return jnp.any(jnp.stack([jnp.any(lane < n) for lane in lanes_]
+                                 + [h < t for h, t in zip(heads, tails, strict=True)]))
+
+    def body(c):
+        states, (bufs, heads, tails, lanes_, slot_states) = c[0], (list(x) for x in c[1:])
+        for k in range(K):
+            busy = lanes_[k] < n
+            stepped = jax.lax.cond(jnp.any(busy), jax.vmap(steps[k]), lambda s: s, slot_states[k])
+            to = jax.vmap(route)(stepped)
+            leave = busy & (to != k)
+            target = jnp.where(leave, lanes_[k], n)  # n: dropped
+            states = jax.tree.map(lambda x, s, t=target: x.at[t].set(s, mode="drop"), states, stepped)
+            for j in range(K):
+                if j == k:
+                    continue
+                move = leave & (to == j)
+                pos = (tails[j] + jnp.cumsum(move, dtype=jnp.int32) - 1) % n
+                bufs[j] = bufs[j].at[jnp.where(move, pos, n)].set(lanes_[k], mode="drop")
+                tails[j] = tails[j] + jnp.sum(move, dtype=jnp.int32)
+            lanes_[k] = jnp.where(leave, n, lanes_[k])
+            slot_states[k] = stepped
+        for k in range(K):
+            free = lanes_[k] >= n
+            pos = heads[k] + jnp.cumsum(free, dtype=jnp.int32) - 1
+            fill = free & (pos < tails[k])
+            lanes_[k] = jnp.where(fill, bufs[k][pos % n], lanes_[k])
+            heads[k] = heads[k] + jnp.minimum(jnp.sum(free, dtype=jnp.int32), tails[k] - heads[k])
+            slot_states[k] = _select(fill, _rows(states, lanes_[k]), slot_states[k])
+        return states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_), tuple(slot_states)
+
+    return jax.lax.while_loop(cond, body, carry)[0]
+
+
+def map_where(fn, need, out, *args, chunk: int):
+    """`out` with lanes `need` replaced by `vmap(fn)(*args)` at those lanes (inside jit).
+
+    Computed on the compacted lanes that need it, `chunk` at a time, in a loop of
+    `ceil(count / chunk)` trips: the cost is proportional to the lanes that need `fn`, not
+    to the batch (a rare branch under a plain `vmap` is paid by every lane).
+    """
+    n = need.shape[0]
+    idx = jnp.nonzero(need, size=n, fill_value=n)[0].astype(jnp.int32)
+    idx = jnp.concatenate([idx, jnp.full(chunk, n, jnp.int32)])
+    trips = (jnp.sum(need, dtype=jnp.int32) + chunk - 1) // chunk
+
+    def body(i, out):
+        sel = jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,))
+        res = jax.vmap(fn)(*_rows(args, sel))
+        return jax.tree.map(lambda o, r: o.at[sel].set(r.astype(o.dtype), mode="drop"), out, res)
+
+    return jax.lax.fori_loop(0, trips, body, out)
+
+
+# --------------------------------------------------------------------------- devices and blocks
+
+
+@functools.cache
+def lane_mesh(devices: tuple | None = None) -> Mesh:
+    """A one-axis device mesh (`"lanes"`) over `devices` (default: every local device)."""
+    return Mesh(np.array(devices if devices is not None else jax.local_devices()), ("lanes",))
+
+
+def lanes_per_block() -> int:
+    """Lanes in one block: `block_lanes()` per local device."""
+    return block_lanes() * len(jax.local_devices())
+
+
+@functools.cache
+def _compiled(fn, static, n_shared: int, n_lanes: int, devices: tuple, spmd: bool):
+    def program(*args):
+        return fn(*args, static)
+
+    if len(devices) == 1 or not spmd:
+        return jax.jit(program)
+    specs = (PartitionSpec(),) * n_shared + (PartitionSpec("lanes"),) * n_lanes
+    return jax.jit(jax.shard_map(program, mesh=lane_mesh(devices), in_specs=specs,
+                                 out_specs=PartitionSpec("lanes"), check_vma=False))
+
+
+def on_devices(fn, static, shared: tuple, lanes: tuple, *, spmd: bool = True):
+    """`fn(*shared, *lanes, static)` with the lane arrays split over every local device
+    (`shared`, e.g. the mesh and traced options, replicated; `static` a hashable argument).
+
+    One device: a plain jit. Several: one SPMD program (`shard_map` over `lane_mesh()`,
+    compiled once) in which each device runs its contiguous share of the lanes with its
+    own loops (no device waits for another's lanes before the block ends), so per-lane
+    results do not depend on the device count. `spmd=False` is for programs `shard_map`
+    cannot trace: optimistix 0.1.0's linear solves fail under `shard_map` in this JAX
+    (lineax compares the shardings of its structures, "pytree does not match
+    out_structure"); those run the same jitted program once per device on its share
+    (`jax.sharding` places the shares; one compile per device). The lane count must be a
+    multiple of the device count (`run_blocks` makes it so).
+    """
+    devices = tuple(jax.local_devices())
+    program = _compiled(fn, static, len(shared), len(lanes), devices, spmd)
+    if len(devices) == 1 or spmd:
+        return program(*shared, *lanes)
+    sharding = NamedSharding(lane_mesh(devices), PartitionSpec("lanes"))
+    lanes = [jax.device_put(x, sharding) for x in lanes]
+    shares = [{s.device: s.data for s in x.addressable_shards} for x in lanes]
+    outs = [program(*jax.device_put(shared, d), *(share[d] for share in shares)) for d in devices]
+
+    def assemble(*parts):
+        shape = (sum(p.shape[0] for p in parts),) + parts[0].shape[1:]
+        return jax.make_array_from_single_device_arrays(shape, sharding, list(parts))
+
+    return jax.tree.map(assemble, *outs)
+
+
+def run_blocks(fn, lanes: tuple, fill: tuple, size: int | None = None):
+    """`fn(*block)` over consecutive blocks of `size` lanes (default `lanes_per_block()`),
+    the last one padded with the rows `fill` (lanes that need no work); returns the
+    outputs as numpy arrays of the original lane count.
+
+    `lanes` are numpy arrays with a leading lane axis. `fn` sees only one shape, so a new
+    lane count compiles nothing. Blocks are dispatched before any result is read back,
+    so host work for one block overlaps the device work of the previous one.
+    """
+    size = lanes_per_block() if size is None else size
+    n = lanes[0].shape[0]
+    outs = []
+    for lo in range(0, max(n, 1), size):
+        block = []
+        for x, f in zip(lanes, fill, strict=True):
+            part = x[lo:lo + size]
+            if part.shape[0] < size:
+                pad = np.broadcast_to(np.asarray(f, x.dtype), (size - part.shape[0],) + x.shape[1:])
+                part = np.concatenate([part, pad])
+            block.append(part)
+        outs.append(fn(*block))
+    return jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n], *outs)

@@ -181,6 +181,8 @@ def _validate(mesh: SurfaceMesh, P, L):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
     for name, x in (("P", P), ("L", L)):
         real_input_dtype(name, x)  # bool, complex, strings: ValueError (docs/input_contract.md)
+        if np.ndim(x) == 0:
+            raise ValueError(f"P and L must have shape (..., 3), got {name} = {x!r}")
     P, L = jnp.asarray(P), jnp.asarray(L)
     if P.shape[-1:] != (3,) or L.shape[-1:] != (3,):
         raise ValueError(f"P and L must have shape (..., 3), got {P.shape} and {L.shape}")

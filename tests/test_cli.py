@@ -45,7 +45,7 @@ def test_compare_writes_a_table_json_and_figure_consistent_with_the_reference(tm
         (dict(scene="ocean"), "scene"),
         (dict(configs=("walk", "newton-magic")), "unknown solver configs"),
         (dict(dtypes=("float16",)), "dtypes"),
-        (dict(n=0), "n, sweep_n"),
+        (dict(n=0), r"n must be an integer in \[1, "),
     ],
 )
 def test_bad_compare_configuration_raises_value_error(kwargs, match):
@@ -56,3 +56,106 @@ def test_bad_compare_configuration_raises_value_error(kwargs, match):
 def test_cli_reports_bad_configuration_with_exit_code_2(capsys):
     assert cli.main(["compare", "--configs", "walk", "nonsense", "--n", "8"]) == 2
     assert "unknown solver configs" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- user errors
+# (docs/input_contract.md "Command line"): one line on stderr, exit status 2, before any work.
+
+
+@pytest.fixture
+def no_run(monkeypatch):
+    """The comparison must not start: every user error is caught before `compare.run`."""
+    def boom(cfg):
+        raise AssertionError("the run started before the error was reported")
+
+    monkeypatch.setattr(cli.cmp, "run", boom)
+
+
+def _one_line_error(capsys, *needles):
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--eta", "-1"], "eta must be one finite positive"), (["--eta", "nan"], "eta must be one finite positive"),
+    (["--eta", "inf"], "eta"), (["--n", "0"], "n must be an integer"), (["--n", str(2**40)], "n must be an integer"),
+    (["--triangles", "-5"], "n_triangles"), (["--repeats", "0"], "repeats"), (["--seed", "-1"], "seed"),
+    (["--ref-n", "-1"], "ref_n"), (["--sweep-n", "0"], "sweep_n"), (["--scene", "missing.obj"], "does not exist"),
+    (["--scene", "ocean"], "scene must be one of"), (["--configs", "walk", "nonsense"], "unknown solver configs"),
+    (["--figure", "out.nothing"], "file type is set by the suffix"),
+    (["--n", "abc"], "invalid int value"), (["--dtype", "float16"], "invalid choice"),
+])
+@pytest.mark.parametrize("command", ["compare", "demo"])
+def test_compare_user_errors_exit_2_with_one_line_before_the_run(no_run, capsys, command, argv, needle):
+    assert cli.main([command, *argv]) == 2
+    _one_line_error(capsys, f"caustics-jax {command}: ", needle)
+
+
+def test_compare_output_paths_are_checked_before_the_run(no_run, capsys, tmp_path):
+    a_file = tmp_path / "file.txt"
+    a_file.write_text("x")
+    for flag, path, needle in [("--json", tmp_path, "is a directory"), ("--figure", tmp_path, "is a directory"),
+                               ("--json", a_file / "sub.json", "is a file, not a directory"),
+                               ("--figure", a_file / "sub" / "f.png", "is a file, not a directory")]:
+        assert cli.main(["compare", "--n", "8", flag, str(path)]) == 2
+        _one_line_error(capsys, flag, needle)
+    assert not (tmp_path / "out").exists()  # nothing created by the checks
+
+
+def test_an_unwritable_output_directory_is_refused(no_run, capsys, tmp_path, monkeypatch):
+    # (root may write anywhere: the permission test asks os.access, so ask it to say no)
+    monkeypatch.setattr(cli.os, "access", lambda path, mode: False)
+    assert cli.main(["compare", "--json", str(tmp_path / "r.json")]) == 2
+    _one_line_error(capsys, "--json", "is not writable")
+
+
+def test_errors_raised_during_the_run_are_one_line_too(monkeypatch, capsys):
+    def fail(cfg):
+        raise ValueError("a solver is unavailable in this dtype")
+
+    monkeypatch.setattr(cli.cmp, "run", fail)
+    assert cli.main(["compare", "--n", "8"]) == 2
+    _one_line_error(capsys, "caustics-jax compare: a solver is unavailable")
+
+    def denied(cfg):
+        raise PermissionError(13, "Permission denied", "/root/x.json")
+
+    monkeypatch.setattr(cli.cmp, "run", denied)
+    assert cli.main(["compare", "--n", "8"]) == 1
+    _one_line_error(capsys, "caustics-jax compare: Permission denied", "/root/x.json")
+
+
+def test_a_long_comparison_warns_with_its_size_and_time(no_run, capsys):
+    assert cli.warn_if_long_compare(CompareConfig()) is None  # the default demo: no warning
+    big = CompareConfig(n=10**7)
+    msg = cli.warn_if_long_compare(big)
+    # 10^7 lanes x 5 configurations x 2 dtypes x 3 timed calls plus the sweep, at 40k solves/s
+    assert f"about {big.expected_solves():.3g} solver lanes" in msg
+    assert big.expected_solves() >= 10**7 * 5 * 2 * 3
+    assert f"about {big.expected_solves() / cli.SOLVES_PER_S / 60:.0f} min" in msg
+    with pytest.raises(AssertionError, match="run started"):  # warned on stderr, then the run starts
+        cli.main(["compare", "--n", str(10**7)])
+    err = capsys.readouterr().err
+    assert "warning: --n 10000000" in err and "min of solver time" in err
+
+
+def test_export_count_beyond_a_storage_buffer_is_refused_and_a_large_one_warns(capsys, tmp_path, monkeypatch):
+    from caustics_jax import export
+
+    assert cli.main(["export", "--out", str(tmp_path / "d"), "--count", str(2**40)]) == 2
+    _one_line_error(capsys, "caustics-jax export: --count", "4 GiB")
+    assert not (tmp_path / "d").exists()  # refused before anything was written
+    assert cli.export_size_warning(list(export.KERNELS), 256, 256, 0) is None
+    msg = cli.export_size_warning(list(export.KERNELS), 10**6, 256, 0)
+    assert "MiB of binaries" in msg and "min" in msg
+
+    def no_export(*a, **k):
+        raise AssertionError("exported")
+
+    monkeypatch.setattr(export, "export", no_export)
+    with pytest.raises(AssertionError, match="exported"):
+        cli.main(["export", "--out", str(tmp_path / "e"), "--count", str(10**6)])
+    assert "warning: --count 1000000" in capsys.readouterr().err

@@ -13,6 +13,7 @@ import pytest
 import caustics_jax as cj
 from caustics_jax import scenes
 from caustics_jax.features import SceneFeatures, features
+from caustics_jax.lanes import lanes_per_block
 from caustics_jax.solvers import Status, _solve, solve
 from caustics_jax.testing import flat_interface_irradiance, partly_covered_floor
 from caustics_jax.transport import irradiance
@@ -153,7 +154,9 @@ def test_flat_closed_form_matches_the_independent_flat_interface_reference(dtype
 
 
 def test_lanes_that_need_no_solve_never_enter_the_solver(monkeypatch):
-    """The walk sees only lanes with a start point (compacted), and none on a flat pool."""
+    """The walk steps only lanes with a start point, and none on a flat pool: lanes come in
+    one fixed-size block (`lanes.lanes_per_block`), the others marked not found, which the
+    pool scheduler never steps (`walk._walk_pool` maps only the found lanes)."""
     seen = []
     solve_walk = _solve.solve_walk
 
@@ -164,10 +167,10 @@ def test_lanes_that_need_no_solve_never_enter_the_solver(monkeypatch):
     monkeypatch.setattr(_solve, "solve_walk", spy)
     mesh, P, L = partly_covered_floor(jnp.float64, n=32, half=6.0)
     crossing = int(np.sum(np.asarray(cj.start_points(mesh, P, L).found)))
-    assert 0 < crossing <= 256 < P.shape[0]  # compacted: one bucket of 256, not 1024 lanes
+    assert 0 < crossing <= 256 < P.shape[0]
     solve(mesh, P, L)
-    assert seen == [(_solve.lane_bucket(crossing), crossing)]
+    assert seen == [(lanes_per_block(), crossing)]
     seen.clear()
     scene = scenes.flat_pool(512, n_receivers=16, dtype=jnp.float64)
     sol = solve(scene.surface, scene.receivers, scene.lights.endpoint(scene.receivers))
-    assert seen == [] and np.asarray(sol.found).all()
+    assert seen == [(lanes_per_block(), 0)] and np.asarray(sol.found).all()

@@ -148,7 +148,7 @@ def test_precision_context_switches_float64_on_and_back_off():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["float64", "float32"]
-    with pytest.raises(ValueError, match="float32 or float64"):
+    with pytest.raises(ValueError, match="'float32' or 'float64'"):
         import caustics_jax as cj
 
         with cj.precision("int32"):

@@ -105,6 +105,11 @@ def test_ellipse_inside_the_first_triangle_is_solved():
     err = refraction_angle_error(mesh, np.asarray(sol.triangle)[found],
                                  np.asarray(sol.barycentric)[found], P[found], L[found], 1.333)
     assert np.all(err < 1e-5)
+    # The pool scheduler samples the ellipse only for these lanes (`lanes.map_where`); the
+    # chunked one for every lane: the same lanes either way.
+    chunked = solve(mesh, P, L, scheduler="chunked")
+    for name in ("status", "point", "iterations", "crossed"):
+        np.testing.assert_array_equal(np.asarray(getattr(sol, name)), np.asarray(getattr(chunked, name)))
 
 
 def test_terminal_statuses_are_named_and_explained():
@@ -157,6 +162,7 @@ def test_bisection_and_illinois_agree():
         (dict(P=np.zeros((4, 3)), L=np.ones((4, 3)), method="magic"), "method"),
         (dict(P=np.zeros((4, 3)), L=np.ones((4, 3)), bogus=1), "option"),
         (dict(P=np.zeros((4, 3)), L=np.ones((4, 3)), bracket="regula"), "bracket"),
+        (dict(P=np.zeros((4, 3)), L=np.ones((4, 3)), scheduler="fifo"), "scheduler"),
     ],
 )
 def test_bad_input_raises_value_error_naming_the_problem(kwargs, match):
@@ -188,3 +194,8 @@ def test_walk_turns_back_when_the_first_direction_fails():
     missed = solve(sc.surface, P[~found], L[~found], method="exhaustive").found
     has = found.sum() + np.asarray(missed).sum()
     assert found.sum() >= 0.99 * has, (found.sum(), has)
+    # Turn-backs, TIR-onset searches and lanes that refine, walk again and refine: the slot
+    # pools (one per branch) give the lanes of the chunked scheduler.
+    chunked = solve(sc.surface, P, L, scheduler="chunked")
+    for name in ("status", "point", "iterations", "crossed"):
+        np.testing.assert_array_equal(np.asarray(getattr(sol, name)), np.asarray(getattr(chunked, name)))

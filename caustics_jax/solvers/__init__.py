@@ -11,7 +11,8 @@ from ._solve import METHODS, solve
 from .exhaustive import Exhaustive, ExhaustiveSolution
 from .newton import Newton
 from .options import SolverOptions, default_tol
+from .trace import Trace
 from .walk import Walk
 
 __all__ = ["METHODS", "Exhaustive", "ExhaustiveSolution", "Newton", "Solution", "SolverOptions", "Status",
-           "Walk", "default_tol", "solve"]
+           "Trace", "Walk", "default_tol", "solve"]

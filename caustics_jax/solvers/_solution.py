@@ -5,6 +5,7 @@ from __future__ import annotations
 import enum
 
 import equinox as eqx
+import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 
@@ -79,3 +80,17 @@ class Solution(eqx.Module):
 
         codes, counts = np.unique(np.asarray(self.status), return_counts=True)
         return {Status(int(c)).name: int(n) for c, n in zip(codes, counts, strict=True)}
+
+
+def confirm_found(status, residual, tol):
+    """`status` with `FOUND` kept only where the reported `|residual| <= tol`, else
+    `NOT_CONVERGED` (inside jit).
+
+    A solver accepts a point when `|f| <= tol` inside its loop; the reported residual is `f`
+    evaluated again at the returned point in a batch of another vector width, where XLA may
+    round it differently (a float32 lane accepted at `|f| = 9.99e-6` was reported at
+    `1.002e-5` with `tol = 1e-5`). `found` must mean `|residual| <= tol` exactly
+    (DESIGN.md's contract), so a lane on that rounding edge is reported as not converged.
+    """
+    return jnp.where((status == Status.FOUND) & ~(jnp.abs(residual) <= tol), Status.NOT_CONVERGED,
+                     status).astype(jnp.int32)

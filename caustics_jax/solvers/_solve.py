@@ -8,13 +8,18 @@ once in its constructor); `method="walk"` with keyword options is sugar for
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
 
+from ..arguments import check_points
+from ..compilation import enable_compilation_cache
 from ..features import GENERAL, SceneFeatures
 from ..features import check as check_features
-from ..lanes import compact_index, lane_bucket, pad_lanes, scatter_lanes
+from ..lanes import lane_mesh, run_blocks
 from ..mesh import SurfaceMesh
 from ..prepared import PreparedSurface, prepare
 from ..start_points import StartPoint
@@ -23,10 +28,13 @@ from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
 from .flat import flat_root, flat_solution
 from .newton import Newton, solve_newton
 from .options import SolverOptions, check_eta
+from .sides import warn_if_wrong_sides
+from .trace import Trace, solve_trace, with_solutions
 from .walk import Walk, solve_walk
 
 #: `method=` names and their solver classes.
-METHODS: dict[str, type[SolverOptions]] = {"walk": Walk, "newton": Newton, "exhaustive": Exhaustive}
+METHODS: dict[str, type[SolverOptions]] = {"walk": Walk, "newton": Newton, "exhaustive": Exhaustive,
+                                          "trace": Trace}
 
 
 def solver_from(method, options: dict) -> SolverOptions:
@@ -43,24 +51,6 @@ def solver_from(method, options: dict) -> SolverOptions:
     return METHODS[method].from_kwargs(**options)
 
 
-def check_points(name: str, X, dtype) -> np.ndarray:
-    """`X` as a float64 numpy array of shape `(..., 3)`: real numbers (integers are
-    promoted), finite, and finite after the cast to the mesh's `dtype`."""
-    X = np.asarray(X)
-    if X.dtype == bool or not (np.issubdtype(X.dtype, np.integer) or np.issubdtype(X.dtype, np.floating)):
-        raise ValueError(f"{name} must hold real numbers (integer or float), got dtype {X.dtype}")
-    if X.ndim == 0 or X.shape[-1] != 3:
-        raise ValueError(f"{name} must have shape (N, 3) (or broadcast to it), got {X.shape}")
-    X = X.astype(np.float64)
-    with np.errstate(over="ignore"):
-        bad = ~np.all(np.isfinite(X) & np.isfinite(X.astype(dtype)), axis=-1)
-    if np.any(bad):
-        rows = np.nonzero(bad.reshape(-1))[0][:10].tolist()
-        raise ValueError(f"{name} has NaN or Inf coordinates, or coordinates that overflow "
-                         f"{np.dtype(dtype).name}, at rows {rows}")
-    return X
-
-
 def check_lanes(mesh: SurfaceMesh, P, L):
     """`P`, `L` broadcast to `(N, 3)` in the mesh's dtype (see `check_points`)."""
     dtype = mesh.dtype
@@ -72,10 +62,11 @@ def check_lanes(mesh: SurfaceMesh, P, L):
         raise ValueError(f"P {P_np.shape} and L {L_np.shape} do not broadcast") from exc
     if P_np.ndim != 2:
         raise ValueError(f"P and L must broadcast to (N, 3), got {P_np.shape}")
-    return jnp.asarray(P_np, dtype), jnp.asarray(L_np, dtype)
+    # (cast and copied on the host: jnp.asarray of a numpy array compiles once per shape)
+    return jax.device_put(P_np.astype(dtype)), jax.device_put(L_np.astype(dtype))
 
 
-def check_start(start, n: int, dtype) -> StartPoint | None:
+def check_start(start, n: int, dtype, n_faces: int | None = None) -> StartPoint | None:
     """A user-given `start=` (a `StartPoint`, or `(face, barycentric, found)`) for `n` lanes."""
     if start is None:
         return None
@@ -88,9 +79,17 @@ def check_start(start, n: int, dtype) -> StartPoint | None:
     if face.shape != (n,) or ab.shape != (n, 2) or found.shape != (n,):
         raise ValueError(f"start must hold face ({n},), barycentric ({n}, 2) and found ({n},) for the "
                          f"{n} lanes of P and L, got {face.shape}, {ab.shape}, {found.shape}")
-    if not np.issubdtype(face.dtype, np.integer) or not np.all(np.isfinite(ab)):
-        raise ValueError("start: face must be integer and barycentric finite")
-    return StartPoint(jnp.asarray(face, jnp.int32), jnp.asarray(ab, dtype), jnp.asarray(found, bool))
+    if face.dtype == bool or not np.issubdtype(face.dtype, np.integer) or found.dtype != bool:
+        raise ValueError(f"start: face must hold integers and found booleans, got {face.dtype} and {found.dtype}")
+    if not (ab.dtype != bool and (np.issubdtype(ab.dtype, np.integer) or np.issubdtype(ab.dtype, np.floating))
+            and np.all(np.isfinite(ab))):
+        raise ValueError(f"start: barycentric must hold finite real numbers, got {ab.dtype}")
+    bad = np.flatnonzero(found & ((face < 0) | (face >= (n_faces if n_faces is not None else np.inf))))
+    if bad.size:
+        raise ValueError(f"start: face must lie in [0, {n_faces}) where found, got {face[bad[:5]].tolist()} "
+                         f"at lanes {bad[:5].tolist()}")
+    return StartPoint(jnp.asarray(np.where(found, face, -1), jnp.int32), jnp.asarray(ab, dtype),
+                      jnp.asarray(found, bool))
 
 
 def empty_solution(n: int, dtype, status: Status = Status.NO_CROSSING) -> Solution:
@@ -131,8 +130,11 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
         **options: the solver's options when `method` is a name (`Walk`, `Newton`,
             `Exhaustive` list them).
 
-    Walk and Newton batches are padded to `lane_bucket(N)` lanes and meshes to
-    power-of-two sizes, so jit compiles once per size class.
+    Walk and Newton run the lanes in fixed-size blocks spread over every local device
+    (`lanes.run_blocks`, `lanes.on_devices`) on the mesh padded to power-of-two sizes:
+    jit compiles once per method, dtype and mesh size class, whatever `N`, and JAX's
+    persistent compilation cache keeps the programs between processes
+    (`caustics_jax.compilation`; `CAUSTICS_JAX_COMPILATION_CACHE=0` turns it off).
 
     Returns a `Solution` (an `ExhaustiveSolution` for `Exhaustive(return_all=True)`);
     `status` holds `Status` codes and `found` is True exactly where a point with
@@ -140,90 +142,107 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
     jitted work; zero lanes give an empty result.
     """
     prep = prepare(mesh)
-    solver = solver_from(method, options)
+    solver = solver_from(*with_solutions(method, options))
     P, L = check_lanes(prep.mesh, P, L)
     eta = check_eta(eta)
     check_features(features)
     n, dtype = P.shape[0], prep.dtype
-    start = check_start(start, n, dtype)
+    start = check_start(start, n, dtype, prep.mesh.faces.shape[0])
     if isinstance(solver, Exhaustive):
         if n == 0:
             if dtype != jnp.float64:
                 raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
             sol = empty_solution(0, dtype, Status.NO_SOLUTION)
-            return ExhaustiveSolution(sol, np.zeros((0, 1, 3)), np.zeros((0, 1), np.int32),
-                                      np.zeros(0, np.int32)) if solver.return_all else sol
+            return ExhaustiveSolution.empty(sol) if solver.return_all else sol
         start = start if start is not None else prep.start_points(P, L)
         return solve_exhaustive(prep.mesh, P, L, eta, tuple(start), solver, padded=prep.padded)
+    if isinstance(solver, Trace):  # every solution on the traced curve (solvers/trace.py)
+        if n == 0:
+            return ExhaustiveSolution.empty(empty_solution(0, dtype, Status.NO_SOLUTION))
+        start = start if start is not None else prep.start_points(P, L)
+        return solve_trace(prep.mesh, P, L, eta, tuple(start), solver, prep.padded)
     if isinstance(solver, Newton):
         solver.check_dtype(dtype)
     if n == 0:
         return empty_solution(0, dtype)
     feats = prep.features if isinstance(features, str) else features
-    if feats is not None and feats != GENERAL and not (isinstance(solver, Newton) and solver.n_starts > 1):
-        # (Newton's extra random starts are drawn per lane position: compaction would move them.)
-        return _solve_specialised(prep, P, L, eta, start, solver, feats)
-    start = start if start is not None else prep.start_points(P, L)
-    return _run_padded(prep, P, L, eta, tuple(start), solver)
+    sol = _solve_blocks(prep, P, L, eta, start, solver, None if feats == GENERAL else feats)
+    warn_if_wrong_sides(prep, P, L, sol)  # mesh wound clockwise, or P and L swapped (solvers/sides.py)
+    return sol
 
 
-def _run_padded(prep: PreparedSurface, P, L, eta, start, solver) -> Solution:
-    """The solver on the lanes padded to their size class, cut back to `N` lanes."""
-    n = P.shape[0]
-    P, L, start = pad_lanes(P, L, start)
-    run = solve_walk if isinstance(solver, Walk) else solve_newton
-    sol = run(prep.padded, P, L, eta, start, solver)
-    return jax.tree.map(lambda x: x[:n], sol)
+# --------------------------------------------------------------------------- blocks of lanes
+# Walk and Newton see lanes only in blocks of `lanes.lanes_per_block()` (the last one padded
+# with lanes that need no work), split over every local device: one compile per method,
+# dtype and mesh size class, whatever the lane count (docs/solvers.md "Batching").
 
 
-# --------------------------------------------------------------------------- specialised path
-# (`features`, DESIGN.md "Skipping what a scene does not need"; docs/features.md)
+def _solve_blocks(prep: PreparedSurface, P, L, eta, start, solver, feats: SceneFeatures | None) -> Solution:
+    """Walk or Newton on every lane, block by block; with `feats` (docs/features.md) lanes
+    whose segment cannot reach the surface never enter a block (`NO_CROSSING`), and on a
+    flat surface the walk's points come in closed form."""
+    enable_compilation_cache()
+    n, dtype = P.shape[0], prep.dtype
+    P_np, L_np = np.asarray(P), np.asarray(L)
+    lanes = np.arange(n)
+    if feats is not None and feats.compact_lanes and start is None:
+        lanes = np.flatnonzero(prep.may_cross(P_np.astype(np.float64), L_np.astype(np.float64)))
+    # Padding lanes: a zero-length segment beside the surface (no start point, no work).
+    away = np.asarray(prep.hi + 2 * prep.pad + 1, dtype)
+    fields = [P_np[lanes], L_np[lanes], lanes.astype(np.int32)]
+    fill = [away, away, np.int32(0)]
+    if start is not None:
+        fields += [np.asarray(x)[lanes] for x in start]
+        fill += [np.int32(-1), np.zeros(2, dtype), False]
+    flat = feats is not None and feats.flat and isinstance(solver, Walk)
+    out = run_blocks(lambda *block: _solve_block(prep, eta, solver, flat, *block), tuple(fields), tuple(fill))
+    sol = _empty_fields(n, dtype)
+    for k, v in out.items():
+        sol[k][lanes] = v
+    return Solution(**jax.device_put(sol))
 
 
-def _compacted_start_points(prep: PreparedSurface, P, L):
-    """`start_points` for the lanes whose segment's bounding box meets the mesh's; the rest
-    (receiver and light both above the water, or both beside the pool) cannot cross."""
-    n = P.shape[0]
-    meets = prep.may_cross(np.asarray(P, np.float64), np.asarray(L, np.float64))
-    base = (jnp.full(n, -1, jnp.int32), jnp.zeros((n, 2), prep.dtype), jnp.zeros(n, bool))
-    idx = np.flatnonzero(meets)
-    if idx.size == 0:
-        return base
-    if idx.size == n:  # nothing to skip: no gather, no scatter
-        return tuple(prep.start_points(P, L))
-    g, real = compact_index(idx)
-    sub = prep.start_points(P[g], L[g])
-    return scatter_lanes(base, g, real, (sub.face, sub.barycentric, sub.found))
+def _empty_fields(n: int, dtype) -> dict:
+    """`empty_solution` as numpy arrays (built on the host: no compile per lane count)."""
+    dtype = np.dtype(dtype)
+    return {"point": np.zeros((n, 3), dtype), "triangle": np.full(n, -1, np.int32),
+            "barycentric": np.zeros((n, 2), dtype), "found": np.zeros(n, bool),
+            "status": np.full(n, Status.NO_CROSSING, np.int32), "iterations": np.zeros(n, np.int32),
+            "residual": np.zeros(n, dtype), "crossed": np.zeros(n, np.int32),
+            "start_point": np.zeros((n, 3), dtype)}
 
 
-def _solve_specialised(prep: PreparedSurface, P, L, eta, start, solver, feats: SceneFeatures) -> Solution:
-    """`solve` for `features`: closed form where the scene allows it, the solver on the
-    compacted remaining lanes, results scattered back (docs/features.md)."""
-    n, dtype, mesh = P.shape[0], prep.dtype, prep.mesh
-    if start is None:
-        start = _compacted_start_points(prep, P, L) if feats.compact_lanes else tuple(prep.start_points(P, L))
-    face, ab0, found = (jnp.asarray(x) for x in start)
-    found_np = np.asarray(found)
-    sol = empty_solution(n, dtype)
-    need = found_np.copy() if feats.compact_lanes else np.ones(n, bool)
-    if feats.flat and isinstance(solver, Walk) and found_np.any():
-        g, real = compact_index(np.flatnonzero(found_np))
-        P_g, L_g = P[g], L[g]
-        _, below, above, usable = flat_root(mesh, P_g, L_g, eta)
-        located = prep.start_points(below, above)
-        flat_sol, good = flat_solution(mesh, P_g, L_g, eta, solver.tolerance(dtype), usable, tuple(located),
-                                       face[g], ab0[g])
-        keep = real & np.asarray(good)
-        sol = scatter_lanes(sol, g, keep, flat_sol)
-        need[g[keep]] = False
-    if not need.any():
-        return sol
-    if need.all():  # nothing to skip: the general batch as is
-        return _run_padded(prep, P, L, eta, (face, ab0, found), solver)
-    g, real = compact_index(np.flatnonzero(need))
-    run = solve_walk if isinstance(solver, Walk) else solve_newton
-    sub = run(prep.padded, P[g], L[g], eta, (face[g], ab0[g], found[g] & jnp.asarray(real)), solver)
-    return scatter_lanes(sol, g, real, sub)
+def _solve_block(prep: PreparedSurface, eta, solver, flat: bool, P, L, lane_id, *start) -> dict:
+    """One block: start points (unless given), the flat closed form where it settles a lane,
+    the solver on the rest. Every call sees the same shapes."""
+    sharding = NamedSharding(lane_mesh(), PartitionSpec("lanes"))
+    P, L, lane_id = (jax.device_put(x, sharding) for x in (P, L, lane_id))
+    if start:
+        face, ab0, found = (jax.device_put(x, sharding) for x in start)
+    else:
+        face, ab0, found = prep.start_points(P, L)
+    if isinstance(solver, Walk):
+        run = lambda need: solve_walk(prep.padded, P, L, eta, (face, ab0, need), solver)  # noqa: E731
+    else:
+        run = lambda need: solve_newton(prep.padded, P, L, eta, (face, ab0, need), solver, lane_id)  # noqa: E731
+    if not flat:
+        return _fields(run(found))
+    mesh = prep.mesh
+    _, below, above, usable = flat_root(mesh, P, L, eta)
+    located = prep.start_points(below, above)
+    flat_sol, good = flat_solution(mesh, P, L, eta, solver.tolerance(prep.dtype), usable, tuple(located),
+                                   face, ab0)
+    good = good & found
+    return _select_fields(good, _fields(flat_sol), _fields(run(found & ~good)))
 
 
-__all__ = ["METHODS", "empty_solution", "lane_bucket", "solve", "solver_from"]
+def _fields(sol: Solution) -> dict:
+    return {f.name: getattr(sol, f.name) for f in dataclasses.fields(Solution)}
+
+
+@jax.jit
+def _select_fields(mask, a: dict, b: dict) -> dict:
+    return {k: jnp.where(mask.reshape(mask.shape + (1,) * (a[k].ndim - 1)), a[k], b[k]) for k in a}
+
+
+__all__ = ["METHODS", "empty_solution", "solve", "solver_from"]

@@ -1,22 +1,44 @@
-"""Newton-type manifold solvers (Hanika et al. 2015 MNEE; Zeltner et al. 2020 SMS) on optimistix.
+"""Newton-type manifold solvers (Hanika et al. 2015 MNEE; Zeltner et al. 2020 SMS).
 
 The unknown is the barycentric point `(a, b)` of the current triangle; the residual is a
 2D constraint that vanishes on refracted paths (MATH.md §4): the half-vector constraint
-(Walter et al. 2009, as in MNEE) or the angle-difference constraint (SMS). Each patch
-runs `optimistix.root_find` for a few steps in the triangle's own (extrapolated)
-coordinates; when the iterate leaves the triangle the walk crosses the edge where the
-step leaves it (the adjacency buffer, `cross_edge`) and restarts there. Same start point
-`M0` and `Solution` as the walk; a lane is `FOUND` exactly when the signed sine at the
-returned point is within `tol`, the criterion every solver is judged by.
+(Walter et al. 2009, as in MNEE) or the angle-difference constraint (SMS). Same start
+point `M0` and `Solution` as the walk; a lane is `FOUND` exactly when the signed sine at
+the returned point is within `tol`, the criterion every solver is judged by. Two ways to
+step across the mesh (`stepping`):
+
+- `"converge"` (on optimistix): each patch runs `optimistix.root_find` for
+  `inner_steps` steps in the triangle's own (extrapolated) coordinates; when the iterate
+  leaves the triangle the solver crosses the edge where the step leaves it (the
+  adjacency buffer, `cross_edge`) and restarts there. It converges inside every
+  extended triangle before crossing, so it pays about 4 steps per triangle crossed.
+- `"one_step"` (as the anchors do: Cycles' `mnee_newton_solver`, Mitsuba's SMS, Hanika
+  et al. 2015 §4.3): one Newton step per iteration, `x - beta J^-1 C(x)` in the plane of
+  the current triangle, then the tentative point is projected back onto the surface
+  along the ray from `P` through it, and the step size `beta` adapts: halved when the
+  projection fails (the ray leaves the mesh) or the projected path is not transmitting
+  (`P` and `L` on the same side of the shading normal), doubled back towards 1 after
+  an accepted step (starting from `initial_step`: 1 takes full Newton steps at once,
+  Cycles starts at 0.1 "since target configurations far from the seed path can send the
+  proposed solution further than the linearized local differential geometric quantities
+  are meant for"). The projection walks the adjacency from the current face along the
+  step (`_reproject`): the local equivalent of Cycles' scene ray cast, exact whenever
+  the ray's hit is reached by crossing edges along the step, as on a heightfield. The
+  2x2 Newton system is solved in closed form (Cramer's rule); `J` comes from `jax.jacfwd`.
 
 SMS-style multiple starts (`n_starts > 1`): extra starts drawn uniformly in the start
-triangle; the found solution nearest `M0` is returned.
+triangle, from a key folded with the lane's index (so a lane's starts do not depend on
+how lanes are batched or spread over devices); the found solution nearest `M0` is
+returned.
+
+Lanes are scheduled by `lanes.run_pool` (default, `scheduler="pool"`: a slot pool refilled
+from a queue of unfinished lanes) or by `lanes.map_lanes` (`"chunked"`: fixed chunks of
+256 lanes, each until its slowest lane); both run the same per-lane iteration.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import ClassVar, NamedTuple
 
 import jax
@@ -24,39 +46,57 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ..arcs import inside as inside_triangle
-from ..barycentric import barycentric_point, edge_barycentric
-from ..lanes import map_lanes
+from ..barycentric import barycentric_coordinates, barycentric_point, edge_barycentric
+from ..geometry import dot
+from ..lanes import map_lanes, on_devices, pool_slots, run_pool
 from ..mesh import cross_edge
 from ..objectives import (
     ObjectiveStatus,
     angle_difference_residual,
     half_vector_residual,
+    path_vectors,
     signed_sine_and_status,
 )
-from ._solution import Solution, Status
-from .options import SolverOptions, check_choice, check_int, check_tol
+from ._solution import Solution, Status, confirm_found
+from .options import SolverOptions, check_choice, check_int, check_real, check_tol
+
+__all__ = ["Newton", "newton_init", "newton_iteration", "solve_newton"]
 
 SOLVERS = ("newton", "chord", "dogleg", "levenberg_marquardt")
 CONSTRAINTS = {"half_vector": half_vector_residual, "angle_difference": angle_difference_residual}
+STEPPING = ("converge", "one_step")
+SCHEDULERS = ("pool", "chunked")
+#: `one_step`: edges the projection may cross in one step before it counts as failed (Cycles
+#: gives its projection ray a bounded number of hits, MNEE_MAX_INTERSECTION_COUNT).
+MAX_PROJECTION_CROSSINGS = 16
+#: `one_step`: the step size `beta` below which the solve gives up (Cycles' MNEE_MINIMUM_STEP_SIZE).
+MIN_BETA = 1e-4
 
 
 @dataclasses.dataclass(frozen=True)
 class Newton(SolverOptions):
-    """Newton-type manifold solvers (MNEE / SMS) on optimistix, and their options.
+    """Newton-type manifold solvers (MNEE / SMS), and their options.
 
-    solver: "newton", "chord", "dogleg" or "levenberg_marquardt" (optimistix solvers).
+    solver: "newton", "chord", "dogleg" or "levenberg_marquardt" (optimistix solvers, for
+        `stepping="converge"`; `"one_step"` takes plain Newton steps: solver "newton").
     constraint: "half_vector" (MNEE) or "angle_difference" (SMS).
+    stepping: "converge" (optimistix to convergence in each triangle, then cross) or
+        "one_step" (one Newton step, then project back onto the surface, as MNEE/SMS).
+    scheduler: "pool" (slot pool, `lanes.run_pool`) or "chunked" (`lanes.map_lanes`).
     tol: acceptance `|f| <= tol` on the signed sine, in `(0, 1)` (None: as the walk). Traced.
-    inner_steps: optimistix steps per triangle patch, in `[1, 1024]`.
-    max_patches: cap on patches (triangle changes and restarts) per lane, in
-        `[1, 2^31 - 1]`. Traced.
+    inner_steps: optimistix steps per triangle patch, in `[1, 1024]` ("converge" only).
+    max_patches: cap per lane on patches (triangle changes and restarts; "one_step":
+        on Newton steps), in `[1, 2^31 - 1]`. Traced.
+    initial_step: "one_step": the first step size `beta`, in `(0, 1]` (1: full steps;
+        Cycles' MNEE starts at 0.1, which costs steps on gentle waves and finds more
+        paths on steep ones: docs/solvers.md). Traced.
     n_starts: 1 = start at `M0` only; more adds uniform starts in the start triangle
         (SMS-style), in `[1, 1024]`.
     seed: for the extra starts, in `[0, 2^31 - 1]`.
     """
 
     method: ClassVar[str] = "newton"
-    traced: ClassVar[tuple[str, ...]] = ("tol", "max_patches")
+    traced: ClassVar[tuple[str, ...]] = ("tol", "max_patches", "initial_step")
 
     solver: str = "newton"
     constraint: str = "half_vector"
@@ -65,14 +105,23 @@ class Newton(SolverOptions):
     max_patches: int = 64
     n_starts: int = 1
     seed: int = 0
+    stepping: str = "converge"
+    scheduler: str = "pool"
+    initial_step: float = 1.0
 
     def _validate(self):
         check_choice("solver", self.solver, SOLVERS)
         check_choice("constraint", self.constraint, tuple(CONSTRAINTS))
+        check_choice("stepping", self.stepping, STEPPING)
+        check_choice("scheduler", self.scheduler, SCHEDULERS)
+        if self.stepping == "one_step" and self.solver != "newton":
+            raise ValueError(f"stepping='one_step' takes plain Newton steps (MNEE/SMS): solver must be "
+                             f"'newton', got {self.solver!r}")
         object.__setattr__(self, "tol", check_tol("tol", self.tol))
         for name, hi in (("inner_steps", 1024), ("max_patches", 2**31 - 1), ("n_starts", 1024)):
             object.__setattr__(self, name, check_int(name, getattr(self, name), 1, hi))
         object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
+        object.__setattr__(self, "initial_step", check_real("initial_step", self.initial_step, 0, 1, lo_open=True))
 
     def check_dtype(self, dtype) -> None:
         """optimistix 0.1.0's trust-region state is created in the default float dtype, so
@@ -119,75 +168,198 @@ class _State(NamedTuple):
     patches: jax.Array
     steps: jax.Array
     crossed: jax.Array
+    beta: jax.Array  # "one_step": the step size (1 for "converge")
 
 
-def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, options: Newton):
+def _f_at(mesh, P, L, face, ab, eta):
+    V, N = mesh.triangle(face)
+    return signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
+
+
+def newton_init(mesh, P, L, face, ab0, found, eta, tol, beta0) -> _State:
+    """A lane's state before its first iteration (`M0` may already be a solution; `beta0`
+    the first step size of "one_step")."""
+    f0, st0 = _f_at(mesh, P, L, face, ab0, eta)
+    at_m0 = (jnp.abs(f0) <= tol) & (st0 == ObjectiveStatus.OK)
+    return _State(face=jnp.asarray(face, jnp.int32), ab=ab0,
+                  status=jnp.where(found, jnp.where(at_m0, Status.FOUND, Status.MAX_STEPS),
+                                   Status.NO_CROSSING).astype(jnp.int32),
+                  done=~found | at_m0, patches=jnp.asarray(0, jnp.int32),
+                  steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
+                  beta=jnp.asarray(beta0, ab0.dtype))
+
+
+def _patch(mesh, P, L, eta, tol, options: Newton, s: _State) -> _State:
+    """"converge": one patch, `inner_steps` optimistix steps in the current (extended)
+    triangle, then accept, cross the exit edge, or stop at a boundary."""
     dtype = mesh.dtype
     solver = _make_solver(options.solver, tol)
     residual = CONSTRAINTS[options.constraint]
     slack = 64 * jnp.finfo(dtype).eps
-
-    def f_at(face_, ab):
-        V, N = mesh.triangle(face_)
-        return signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
-
-    def body(s: _State) -> _State:
-        V, N = mesh.triangle(s.face)
-        fn = lambda y, args: residual(V, N, P, L, y, eta)  # noqa: E731
-        sol = optx.root_find(fn, solver, s.ab, max_steps=options.inner_steps, throw=False)
-        ab_new = sol.value
-        finite = jnp.all(jnp.isfinite(ab_new))
-        ab_new = jnp.where(finite, ab_new, s.ab)
-        inside = inside_triangle(ab_new, slack)
-        k, t, _ = _exit_edge(s.ab, ab_new)
-        g, _, _, ab_entry = cross_edge(mesh, s.face, k, t)
-        left = ~inside & (g < 0)
-        f_new, st_new = f_at(s.face, jnp.where(inside, ab_new, s.ab))
-        converged = inside & (jnp.abs(f_new) <= tol) & (st_new == ObjectiveStatus.OK)
-        face = jnp.where(inside | left, s.face, g)
-        ab = jnp.where(inside, ab_new, jnp.where(left, edge_barycentric(k, t), ab_entry))
-        status = jnp.where(converged, Status.FOUND, s.status)
-        status = jnp.where(left, Status.LEFT_MESH, status)
-        status = jnp.where(~finite, Status.NOT_CONVERGED, status)
-        done = converged | left | ~finite
-        return _State(face=face.astype(jnp.int32), ab=ab, status=status.astype(jnp.int32),
+    V, N = mesh.triangle(s.face)
+    fn = lambda y, args: residual(V, N, P, L, y, eta)  # noqa: E731
+    sol = optx.root_find(fn, solver, s.ab, max_steps=options.inner_steps, throw=False)
+    ab_new = sol.value
+    finite = jnp.all(jnp.isfinite(ab_new))
+    ab_new = jnp.where(finite, ab_new, s.ab)
+    inside = inside_triangle(ab_new, slack)
+    k, t, _ = _exit_edge(s.ab, ab_new)
+    g, _, _, ab_entry = cross_edge(mesh, s.face, k, t)
+    left = ~inside & (g < 0)
+    f_new, st_new = _f_at(mesh, P, L, s.face, jnp.where(inside, ab_new, s.ab), eta)
+    converged = inside & (jnp.abs(f_new) <= tol) & (st_new == ObjectiveStatus.OK)
+    face = jnp.where(inside | left, s.face, g)
+    ab = jnp.where(inside, ab_new, jnp.where(left, edge_barycentric(k, t), ab_entry))
+    status = jnp.where(converged, Status.FOUND, s.status)
+    status = jnp.where(left, Status.LEFT_MESH, status)
+    status = jnp.where(~finite, Status.NOT_CONVERGED, status)
+    done = converged | left | ~finite
+    return s._replace(face=face.astype(jnp.int32), ab=ab, status=status.astype(jnp.int32),
                       done=done, patches=s.patches + 1,
                       steps=s.steps + sol.stats["num_steps"].astype(jnp.int32),
                       crossed=s.crossed + jnp.where(inside | left, 0, 1))
 
-    def step(s):
-        nxt = body(s)
-        return jax.tree.map(lambda n, o: jnp.where(s.done, o, n), nxt, s)
 
-    f0, st0 = f_at(face, ab0)
-    at_m0 = (jnp.abs(f0) <= tol) & (st0 == ObjectiveStatus.OK)
-    init = _State(face=jnp.asarray(face, jnp.int32), ab=ab0,
-                  status=jnp.where(found, jnp.where(at_m0, Status.FOUND, Status.MAX_STEPS),
-                                   Status.NO_CROSSING).astype(jnp.int32),
-                  done=~found | at_m0, patches=jnp.asarray(0, jnp.int32),
-                  steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32))
-    s = jax.lax.while_loop(lambda s: ~s.done & (s.patches < max_patches), step, init)
-    f_end, st_end = f_at(s.face, s.ab)
+def _ray_plane_barycentric(V, P, T):
+    """Barycentrics of the point where the ray from `P` through `T` meets the plane of
+    triangle `V` (seed 001 eq. 3 solved for `a, b`), and whether it meets it ahead of `P`."""
+    E1, E2 = V[1] - V[0], V[2] - V[0]
+    n = jnp.cross(E1, E2)
+    d = T - P
+    denom = dot(n, d)
+    ok = denom != 0
+    s = jnp.where(ok, dot(n, V[0] - P) / jnp.where(ok, denom, 1), 0)
+    return barycentric_coordinates(E1, E2, P + s * d - V[0]), ok & (s > 0)
+
+
+def _reproject(mesh, P, face, ab, ab_t):
+    """Project the tentative point `ab_t` (in `face`'s extended plane) back onto the surface
+    along the ray from `P` through it, walking the adjacency from `face` along the step
+    (Cycles' MNEE projects with a scene ray cast from the previous vertex; on a mesh the
+    hit is found by crossing edges along the step). Returns `(face, ab, hit, left, crossings)`."""
+    V, _ = mesh.triangle(face)
+    T = barycentric_point(V, ab_t)
+    slack = 64 * jnp.finfo(ab.dtype).eps
+
+    def cond(c):
+        face, x, y, ok, left, n = c
+        return ok & ~inside_triangle(y, slack) & (n < MAX_PROJECTION_CROSSINGS)
+
+    def body(c):
+        face, x, y, ok, left, n = c
+        k, t, _ = _exit_edge(x, y)
+        g, _, _, e = cross_edge(mesh, face, k, t)
+        Vg, _ = mesh.triangle(g)
+        y_g, hit = _ray_plane_barycentric(Vg, P, T)
+        ok_g = (g >= 0) & hit
+        return (jnp.where(ok_g, g, face), jnp.where(ok_g, e, x), jnp.where(ok_g, y_g, y), ok_g,
+                left | (g < 0), n + 1)
+
+    face, _, y, ok, left, n = jax.lax.while_loop(
+        cond, body, (face, ab, ab_t, jnp.asarray(True), jnp.asarray(False), jnp.int32(0)))
+    return face, y, ok & inside_triangle(y, slack), left, n
+
+
+def _one_step(mesh, P, L, eta, tol, options: Newton, s: _State) -> _State:
+    """"one_step": one Newton step with step size `beta`, projected back onto the surface
+    (module docstring; Cycles' `mnee_newton_solver` loop body)."""
+    residual = CONSTRAINTS[options.constraint]
+    eps = jnp.finfo(mesh.dtype).eps
+    V, N = mesh.triangle(s.face)
+    C = lambda ab: residual(V, N, P, L, ab, eta)  # noqa: E731
+    r, J = C(s.ab), jax.jacfwd(C)(s.ab)
+    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    solvable = jnp.isfinite(det) & (det != 0) & jnp.all(jnp.isfinite(r))
+    inv = 1 / jnp.where(solvable, det, 1)
+    dx = jnp.stack([J[1, 1] * r[0] - J[0, 1] * r[1], J[0, 0] * r[1] - J[1, 0] * r[0]]) * inv
+    dx = jnp.where(solvable, dx, 0)
+    face, ab, hit, left, crossings = _reproject(mesh, P, s.face, s.ab, s.ab - s.beta * dx)
+    # The projected path must still refract: P and L on opposite sides of the shading
+    # normal (Cycles rejects the tentative vertex otherwise).
+    Vn, Nn = mesh.triangle(face)
+    _, n_s, w_P, w_L, degenerate = path_vectors(Vn, Nn, P, L, ab)
+    transmits = (dot(n_s, w_P) * dot(n_s, w_L) < 0) & ~degenerate
+    accept = solvable & hit & transmits
+    f, st = _f_at(mesh, P, L, face, ab, eta)
+    found = accept & (jnp.abs(f) <= tol) & (st == ObjectiveStatus.OK)
+    # A step that cannot move the point any more (Cycles: MNEE_MIN_PROGRESS_DISTANCE).
+    stalled = accept & ~found & (jnp.linalg.norm(s.beta * dx) <= 4 * eps * jnp.maximum(jnp.linalg.norm(s.ab), 1))
+    beta = jnp.where(accept, jnp.minimum(1, 2 * s.beta), s.beta / 2)
+    gave_up = ~accept & (beta < MIN_BETA)
+    status = jnp.where(found, Status.FOUND, s.status)
+    status = jnp.where(stalled | (gave_up & ~left) | ~solvable, Status.NOT_CONVERGED, status)
+    status = jnp.where(gave_up & left & solvable, Status.LEFT_MESH, status)
+    return s._replace(
+        face=jnp.where(accept, face, s.face).astype(jnp.int32), ab=jnp.where(accept, ab, s.ab),
+        status=status.astype(jnp.int32), done=found | stalled | gave_up | ~solvable,
+        patches=s.patches + 1, steps=s.steps + 1,
+        crossed=s.crossed + jnp.where(accept, crossings, 0), beta=beta.astype(s.beta.dtype))
+
+
+def newton_iteration(mesh, P, L, eta, tol, options: Newton, s: _State) -> _State:
+    """One iteration of a lane: a patch ("converge") or a projected Newton step ("one_step")."""
+    if options.stepping == "one_step":
+        return _one_step(mesh, P, L, eta, tol, options, s)
+    return _patch(mesh, P, L, eta, tol, options, s)
+
+
+def _finish(mesh, P, L, eta, s: _State):
+    """Lanes that ran out of patches at a totally reflecting point report TIR; `f` at the end."""
+    f_end, st_end = _f_at(mesh, P, L, s.face, s.ab, eta)
     status = jnp.where((s.status == Status.MAX_STEPS) & (st_end == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION),
                        Status.TOTAL_INTERNAL_REFLECTION, s.status)
     return s._replace(status=status.astype(jnp.int32)), f_end
 
 
-@functools.partial(jax.jit, static_argnames=("options",))
-def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
-                  options: Newton) -> Solution:
+def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, beta0, options: Newton):
+    """One lane in its own `while_loop` (the "chunked" scheduler vmaps it)."""
+    def step(s):
+        nxt = newton_iteration(mesh, P, L, eta, tol, options, s)
+        return jax.tree.map(lambda n, o: jnp.where(s.done, o, n), nxt, s)
+
+    init = newton_init(mesh, P, L, face, ab0, found, eta, tol, beta0)
+    s = jax.lax.while_loop(lambda s: ~s.done & (s.patches < max_patches), step, init)
+    return _finish(mesh, P, L, eta, s)
+
+
+def _pooled(mesh, P, L, face, ab, found, eta, tol, max_patches, beta0, options: Newton):
+    """Every lane (flattened over starts) through `lanes.run_pool`: the same per-lane iteration."""
+    # (init and finish in `map_lanes` chunks, as the "chunked" scheduler: XLA rounds `f` at
+    # another vector width differently: residuals 3.9e-7 apart in float32, 9e-16 in float64)
+    init = map_lanes(lambda p, l, f, a, ok: newton_init(mesh, p, l, f, a, ok, eta, tol, beta0), P, L, face, ab, found)
+
+    def step(c):
+        p, l, s = c
+        nxt = newton_iteration(mesh, p, l, eta, tol, options, s)
+        nxt = jax.tree.map(lambda n, o: jnp.where(s.done, o, n), nxt, s)
+        return (p, l, nxt), nxt.done | (nxt.patches >= max_patches)
+
+    running = ~init.done & (init.patches < max_patches)
+    _, _, states = run_pool(step, (P, L, init), running, pool_slots())
+    return map_lanes(lambda p, l, s: _finish(mesh, p, l, eta, s), P, L, states)
+
+
+def _newton_block(mesh, eta, tol, max_patches, beta0, P, L, face, ab0, found, lane_id, options: Newton) -> Solution:
+    """One device's share of a block of lanes (`lanes.on_devices`)."""
     eta = jnp.asarray(eta, mesh.dtype)
     tol = jnp.asarray(tol, mesh.dtype)
-    n = P.shape[0]
-    if options.n_starts > 1:
+    n, S = P.shape[0], options.n_starts
+    if S > 1:
         key = jax.random.PRNGKey(options.seed)
-        w = jax.random.dirichlet(key, jnp.ones(3, mesh.dtype), (n, options.n_starts - 1))
+        w = jax.vmap(lambda i: jax.random.dirichlet(jax.random.fold_in(key, i), jnp.ones(3, mesh.dtype), (S - 1,)))(
+            lane_id)
         starts = jnp.concatenate([ab0[:, None], w[..., 1:]], axis=1)  # (n, S, 2)
     else:
         starts = ab0[:, None]
-    lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, tol, max_patches, options)  # noqa: E731
-    per_start = jax.vmap(lambda a: map_lanes(lane, P, L, face, a, found), in_axes=1, out_axes=1)
-    states, f_end = per_start(starts)  # leaves (n, S, ...)
+    if options.scheduler == "pool":
+        rep = lambda x: jnp.repeat(x, S, axis=0)  # noqa: E731  (lane-major: lane i's starts together)
+        states, f_end = _pooled(mesh, rep(P), rep(L), rep(face), starts.reshape(n * S, 2), rep(found),
+                                eta, tol, max_patches, beta0, options)
+        states, f_end = jax.tree.map(lambda x: x.reshape((n, S) + x.shape[1:]), (states, f_end))
+    else:
+        lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, tol, max_patches, beta0, options)  # noqa: E731
+        per_start = jax.vmap(lambda a: map_lanes(lane, P, L, face, a, found), in_axes=1, out_axes=1)
+        states, f_end = per_start(starts)  # leaves (n, S, ...)
     V, N = mesh.triangle(states.face)
     points = barycentric_point(V, states.ab)
     V0, _ = mesh.triangle(face)
@@ -196,7 +368,8 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
     dist = jnp.where(ok, jnp.linalg.norm(points - M0[:, None], axis=-1), jnp.inf)
     best = jnp.where(jnp.any(ok, axis=1), jnp.argmin(dist, axis=1), 0)
     pick = lambda x: jnp.take_along_axis(x, best.reshape((n, 1) + (1,) * (x.ndim - 2)), axis=1)[:, 0]  # noqa: E731
-    status = pick(states.status)
+    f_best = pick(f_end)
+    status = confirm_found(pick(states.status), f_best, tol)
     return Solution(
         point=jnp.where(found[:, None], pick(points), 0),
         triangle=jnp.where(found, pick(states.face), -1),
@@ -204,14 +377,18 @@ def _newton_batch(mesh, P, L, face, ab0, found, eta, tol, max_patches,
         found=status == Status.FOUND,
         status=status,
         iterations=jnp.sum(states.steps, axis=1),
-        residual=jnp.where(found, pick(f_end), 0),
+        residual=jnp.where(found, f_best, 0),
         crossed=pick(states.crossed),
         start_point=jnp.where(found[:, None], M0, 0),
     )
 
 
-def solve_newton(mesh, P, L, eta, start, opts: Newton) -> Solution:
-    """The Newton baselines on a padded batch (see `walk.solve_walk` for the arguments)."""
+def solve_newton(mesh, P, L, eta, start, opts: Newton, lane_id=None) -> Solution:
+    """The Newton baselines on one block of lanes (see `walk.solve_walk`); `lane_id` `(n,)`
+    the lanes' indices in the whole batch (keys of the extra starts; default `arange(n)`)."""
     face, ab0, found = start
-    return _newton_batch(mesh, P, L, face, ab0, found, eta, opts.tolerance(mesh.dtype),
-                         jnp.int32(opts.max_patches), opts.static())
+    lane_id = jnp.arange(P.shape[0], dtype=jnp.int32) if lane_id is None else lane_id
+    shared = (mesh, jnp.asarray(eta, mesh.dtype), jnp.asarray(opts.tolerance(mesh.dtype), mesh.dtype),
+              jnp.int32(opts.max_patches), jnp.asarray(opts.initial_step, mesh.dtype))
+    return on_devices(_newton_block, opts.static(), shared, (P, L, face, ab0, found, lane_id),
+                      spmd=opts.stepping != "converge")  # optimistix: see `lanes.on_devices`

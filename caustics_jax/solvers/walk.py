@@ -23,12 +23,24 @@ Per lane, from the start point `M0` (on the conic by construction, §3.4.2):
 
 A lane is `FOUND` exactly when `|f| <= tol` at the returned point (`f` = sine of the
 angle between the refracted direction and `w_L`, so `tol` bounds the angle error).
+
+Scheduling (`Walk.scheduler`, docs/solvers.md "Throughput and the machine's limit"): under
+`vmap` every lane pays for every branch, and a `while_loop` runs until its slowest lane.
+`"pool"` (default) computes the first triangle without the ellipse samples for every lane
+that has a start point, the 64-sample ellipse search (step 1's rare case) only for the
+lanes whose curve has no edge crossing (`lanes.map_where`), and steps the lanes in two
+slot pools, one for walking lanes (crossings) and one for refining lanes (dichotomy and
+TIR-onset search), each refilled from a queue of lanes in its mode (`lanes.run_pools`),
+so a step computes only the branch its lane needs. `"chunked"` is the
+previous scheduler (every lane computes the ellipse samples; fixed chunks of 256 lanes,
+each until its slowest lane), kept for comparison. Both apply the same per-lane functions
+(`walk_init`, `walk_advance`), so statuses, points and iteration counts are the same
+(`tests/test_scheduling.py`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import ClassVar, NamedTuple
 
 import jax
@@ -48,15 +60,16 @@ from ..arcs import (
 )
 from ..barycentric import barycentric_point
 from ..conic import conic_coefficients, conic_tangent
-from ..lanes import map_lanes
+from ..lanes import map_lanes, map_where, on_devices, pool_slots, run_pools
 from ..mesh import SurfaceMesh, cross_edge
 from ..objectives import ObjectiveStatus, bracket_objective, path_vectors, signed_sine
-from ._solution import Solution, Status
+from ._solution import Solution, Status, confirm_found
 from .options import SolverOptions, check_choice, check_int, check_tol, default_tol
 
-__all__ = ["Walk", "default_tol", "solve_walk", "walk_lane"]
+__all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_init", "walk_lane"]
 
 WALK, BISECT, DONE = 0, 1, 2
+SCHEDULERS = ("pool", "chunked")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,6 +82,9 @@ class Walk(SolverOptions):
     bracket: "illinois" (false position with the Illinois fix) or "bisection" (the paper).
     ellipse_samples: pencil samples of an ellipse inside the first triangle (§3.4.4),
         in `[2, 4096]`.
+    scheduler: "pool" (the rare branches only where needed, a slot pool refilled from a
+        queue of unfinished lanes) or "chunked" (the previous scheduler: chunks of 256
+        lanes, each until its slowest lane); same per-lane results (module docstring).
     """
 
     method: ClassVar[str] = "walk"
@@ -78,12 +94,14 @@ class Walk(SolverOptions):
     max_steps: int = 512
     bracket: str = "illinois"
     ellipse_samples: int = 64
+    scheduler: str = "pool"
 
     def _validate(self):
         object.__setattr__(self, "tol", check_tol("tol", self.tol))
         object.__setattr__(self, "max_steps", check_int("max_steps", self.max_steps, 1))
         check_choice("bracket", self.bracket, ("illinois", "bisection"))
         object.__setattr__(self, "ellipse_samples", check_int("ellipse_samples", self.ellipse_samples, 2, 4096))
+        check_choice("scheduler", self.scheduler, SCHEDULERS)
 
 
 class _State(NamedTuple):
@@ -122,12 +140,29 @@ def _cos_at_P(V, N, P, L, ab):
     return -jnp.sum(w_P * n_s, axis=-1)
 
 
-def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
-    """Initial state from `M0`: bracket, walk direction, ellipse, or a terminal status.
+class _Ellipse(NamedTuple):
+    """What the ellipse search (`_ellipse_bracket`) needs from the first triangle."""
 
-    Returns `((can_turn, state), other)`: `other` walks the other way from the one chosen
-    here; `can_turn` says whether that second way exists (a walk that started without a
-    bracket, with an exit in both directions). Both share every evaluation of `f`.
+    coef: jax.Array
+    tau: jax.Array
+    perp: jax.Array
+    near: jax.Array  # (2, 2): the near points of +t0 and -t0
+    phi_near: jax.Array  # pencil angle of the +t0 near point
+    f_near: jax.Array  # (2,)
+    g_near: jax.Array  # (2,)
+    st_near: jax.Array  # (2,)
+
+
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol):
+    """Initial state from `M0`: bracket, walk direction, or a terminal status; an ellipse
+    inside the triangle is left to `_ellipse_bracket`.
+
+    Returns `(can_turn, state, other, is_ellipse, ellipse)`: `other` walks the other way
+    from the one chosen here; `can_turn` says whether that second way exists (a walk that
+    started without a bracket, with an exit in both directions). Both share every
+    evaluation of `f`. `is_ellipse`: the curve has no edge crossing (§3.4.4); there the
+    state reads `UNRESOLVED_ELLIPSE` (unless `M0` is a solution, degenerate, or has no
+    start point) until `_ellipse_bracket` has sampled the curve (`ellipse`: its inputs).
     """
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
@@ -153,13 +188,11 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     (okp, kp, tp, abp, phip, taup, perpp, phisp, nearp, roomp) = dirs[0]
     (okm, km, tm, abm, phim, taum, perpm, phism, nearm, roomm) = dirs[1]
 
-    # Ellipse inside the triangle: sample the whole curve through the pencil at M0.
+    # The frame of the pencil at M0, for an ellipse inside the triangle (`_ellipse_bracket`).
     tau_e, perp_e = orientation(coef, ab0, t0)
-    phis = jnp.pi * jnp.arange(1, n_ellipse, dtype=dtype) / n_ellipse
-    pts, pts_ok = jax.vmap(lambda p: pencil_point(coef, ab0, tau_e, perp_e, p))(phis)
-
-    pts_all = jnp.concatenate([jnp.stack([ab0, abp, abm, nearp, nearm]), pts])
-    f_all, st_all, g_all = bracket_objective(V, N, P, L, pts_all, eta)
+    # f at M0, the two exits and the two near points (the ellipse samples apart, in
+    # `_ellipse_bracket`: one batch of 5 points here, rounded alike by both schedulers).
+    f_all, st_all, g_all = bracket_objective(V, N, P, L, jnp.stack([ab0, abp, abm, nearp, nearm]), eta)
     gp, gm, gsp, gsm = g_all[1], g_all[2], g_all[3], g_all[4]
     f0, fp, fm, fsp, fsm = f_all[:5]
     st0, stp, stm = st_all[0], st_all[1], st_all[2]
@@ -179,23 +212,12 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
     cos_p, cos_m = _cos_at_P(V, N, P, L, jnp.stack([abp, abm]))
     prefer_m = jnp.where(tirp != tirm, tirp, jnp.where(tirp, cos_m > cos_p, jnp.abs(fm) < jnp.abs(fp)))
 
-    # The ellipse from just after M0 (near point of +t0) to just before it (near point
-    # of -t0), so that no stretch of the curve is left out.
-    v = nearm - ab0
-    phi_nm = jnp.arctan2(v @ perp_e, v @ tau_e)
-    phi_nm = jnp.where(phi_nm < 0, phi_nm + jnp.pi, phi_nm)
-    phis_all = jnp.concatenate([phisp[None], phis, phi_nm[None]])
-    pts = jnp.concatenate([nearp[None], pts, nearm[None]])
-    fs_all = jnp.concatenate([fsp[None], f_all[5:], fsm[None]])
-    gs = jnp.concatenate([gsp[None], g_all[5:], gsm[None]])
-    sts = jnp.concatenate([st_all[3:4], st_all[5:], st_all[4:5]])
-    ok_all = jnp.concatenate([jnp.ones(1, bool), pts_ok, jnp.ones(1, bool)]) & (sts == ObjectiveStatus.OK)
-    change = root_between((fs_all[:-1], gs[:-1]), (fs_all[1:], gs[1:])) & ok_all[:-1] & ok_all[1:]
-    j = jnp.argmax(change)
-    ellipse_bracket = change[j]
+    is_ellipse = ~okp & ~okm
+    # Placeholders where the curve is an ellipse: `_ellipse_bracket` fills the bracket in.
+    phis_all, fs_all, pts = jnp.zeros(2, dtype), jnp.zeros(2, dtype), jnp.zeros((2, 2), dtype)
+    j, ellipse_bracket = 0, jnp.asarray(False)
 
     def build(walk_m):
-        is_ellipse = ~okp & ~okm
         bracket = jnp.where(is_ellipse, ellipse_bracket, br_p | br_m)
         use_m = use_m_bracket | (~(br_p | br_m) & walk_m)
         # No sign change, and the arc of the walk direction runs into TIR: search it
@@ -254,7 +276,42 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, n_ellipse):
         )
 
     walk_m = okm & (~okp | prefer_m)
-    return build(walk_m), build(~walk_m)[1]
+    (can_flip, state), other = build(walk_m), build(~walk_m)[1]
+    ellipse = _Ellipse(coef, tau_e, perp_e, jnp.stack([nearp, nearm]), phisp, jnp.stack([fsp, fsm]),
+                       jnp.stack([gsp, gsm]), st_all[3:5])
+    return can_flip, state, other, is_ellipse, ellipse
+
+
+def _ellipse_bracket(mesh, P, L, eta, n_ellipse, s: _State, e: _Ellipse) -> _State:
+    """The curve is an ellipse inside the first triangle (seed 001 §3.4.4): sample it at
+    `n_ellipse` pencil angles through `M0`, from just after `M0` (the near point of +t0)
+    to just before it (the near point of -t0), so that no stretch is left out, and
+    bracket the first sign change of `f`. A lane `_first_triangle` left unresolved starts
+    refining there; without a sign change it stays `UNRESOLVED_ELLIPSE`."""
+    dtype = s.anchor.dtype
+    ab0 = s.anchor
+    V, N = mesh.triangle(s.face)
+    phis = jnp.pi * jnp.arange(1, n_ellipse, dtype=dtype) / n_ellipse
+    pts, pts_ok = jax.vmap(lambda p: pencil_point(e.coef, ab0, e.tau, e.perp, p))(phis)
+    f_e, st_e, g_e = bracket_objective(V, N, P, L, pts, eta)
+    v = e.near[1] - ab0
+    phi_nm = jnp.arctan2(v @ e.perp, v @ e.tau)
+    phi_nm = jnp.where(phi_nm < 0, phi_nm + jnp.pi, phi_nm)
+    phis_all = jnp.concatenate([e.phi_near[None], phis, phi_nm[None]])
+    pts = jnp.concatenate([e.near[:1], pts, e.near[1:]])
+    fs_all = jnp.concatenate([e.f_near[:1], f_e, e.f_near[1:]])
+    gs = jnp.concatenate([e.g_near[:1], g_e, e.g_near[1:]])
+    sts = jnp.concatenate([e.st_near[:1], st_e, e.st_near[1:]])
+    ok_all = jnp.concatenate([jnp.ones(1, bool), pts_ok, jnp.ones(1, bool)]) & (sts == ObjectiveStatus.OK)
+    change = root_between((fs_all[:-1], gs[:-1]), (fs_all[1:], gs[1:])) & ok_all[:-1] & ok_all[1:]
+    j = jnp.argmax(change)
+    opened = change[j] & (s.status == Status.UNRESOLVED_ELLIPSE)
+    return s._replace(
+        mode=jnp.where(opened, BISECT, s.mode).astype(jnp.int32),
+        status=jnp.where(opened, Status.FOUND, s.status).astype(jnp.int32),
+        phi_lo=jnp.where(opened, phis_all[j], s.phi_lo), phi_hi=jnp.where(opened, phis_all[j + 1], s.phi_hi),
+        f_lo=jnp.where(opened, fs_all[j], s.f_lo), f_hi=jnp.where(opened, fs_all[j + 1], s.f_hi),
+        ab_lo=jnp.where(opened, pts[j], s.ab_lo), ab_hi=jnp.where(opened, pts[j + 1], s.ab_hi))
 
 
 def _walk_geometry(mesh, coef, g, k_in, t_in, e):
@@ -417,9 +474,85 @@ def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
 
 
+class LaneState(NamedTuple):
+    """What one lane carries through the walk: its receiver and light, the walk state, and
+    the turn-back (`walk_lane`): whether it turned already, whether it can, and the walk
+    the other way from `M0`."""
+
+    P: jax.Array
+    L: jax.Array
+    state: _State
+    turned: jax.Array
+    can_flip: jax.Array
+    other: _State
+
+
+def _walk_branch(mesh, P, L, eta, tol, s: _State) -> _State:
+    """`_step` for a lane in WALK mode: only the crossing is computed."""
+    g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
+    V, N, coef = _frame(mesh, g, P, L)
+    walk_geo = _walk_geometry(mesh, coef, g, k_in, t_in, e)
+    f2, st2, g2 = bracket_objective(V, N, P, L, jnp.stack([e, walk_geo[6]]), eta)
+    return _walk_update(s, g, e, walk_geo, f2, st2, g2, tol)
+
+
+def _bisect_branch(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
+    """`_step` for a lane in BISECT mode: only the refinement cut is computed."""
+    V, N, coef = _frame(mesh, s.face, P, L)
+    p, phi, ok = _bisect_geometry(coef, s, illinois)
+    f2, st2, _ = bracket_objective(V, N, P, L, jnp.stack([p, p]), eta)
+    return _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
+
+
+def walk_init(mesh: SurfaceMesh, P, L, face, ab0, found, eta, tol, options: Walk):
+    """A lane's `LaneState` before its first step (the first triangle, §3.4.2-3.4.3),
+    whether its curve is an ellipse inside that triangle (then `walk_ellipse` completes
+    the state), and what the ellipse search needs."""
+    can_flip, state, other, is_ellipse, ellipse = _first_triangle(mesh, P, L, face, ab0, found, eta, tol)
+    return LaneState(P, L, state, jnp.asarray(False), can_flip, other), is_ellipse, ellipse
+
+
+def walk_ellipse(mesh: SurfaceMesh, eta, options: Walk, lane: LaneState, ellipse: _Ellipse) -> LaneState:
+    """The first triangle of a lane whose curve is an ellipse inside it (§3.4.4): its
+    `ellipse_samples` pencil samples and the bracket they give (`_ellipse_bracket`)."""
+    return lane._replace(state=_ellipse_bracket(mesh, lane.P, lane.L, eta, options.ellipse_samples, lane.state,
+                                                ellipse))
+
+
+def walk_advance(mesh: SurfaceMesh, eta, tol, options: Walk, lane: LaneState, mode: int | None = None) -> LaneState:
+    """One iteration of a lane (`_step`: a crossing or a refinement cut), with the turn-back:
+    a walk that fails (TIR, boundary, lost curve, stalled bracket) restarts once from `M0`
+    the other way, keeping its step count. A lane already done is returned unchanged.
+    `mode` (WALK or BISECT) computes only that branch, for a lane known to be in it (the
+    pool scheduler); None computes both and selects (one vmapped program for all lanes)."""
+    s = lane.state
+    illinois = options.bracket == "illinois"
+    if mode == WALK:
+        nxt = _walk_branch(mesh, lane.P, lane.L, eta, tol, s)
+    elif mode == BISECT:
+        nxt = _bisect_branch(mesh, lane.P, lane.L, eta, tol, illinois, s)
+    else:
+        nxt = _step(mesh, lane.P, lane.L, eta, tol, illinois, s)
+    nxt = jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
+    failed = (nxt.mode == DONE) & (nxt.status != Status.FOUND) & lane.can_flip & ~lane.turned
+    restart = lane.other._replace(steps=nxt.steps, crossed=nxt.crossed)
+    nxt = jax.tree.map(lambda r, n: jnp.where(failed, r, n), restart, nxt)
+    return lane._replace(state=nxt, turned=lane.turned | failed)
+
+
+def _running(s: _State, max_steps):
+    return (s.mode != DONE) & (s.steps < max_steps)
+
+
+def _capped(s: _State) -> _State:
+    """Lanes still running at the end hit the cap `max_steps`."""
+    return s._replace(status=jnp.where(s.mode != DONE, Status.MAX_STEPS, s.status).astype(jnp.int32))
+
+
 def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: Walk,
               tol, max_steps):
-    """Walk one lane (vmapped by `solve`); returns the final `_State`.
+    """Walk one lane in its own `while_loop` (vmapped by the "chunked" scheduler); returns
+    the final `_State`.
 
     `tol` and `max_steps` are traced (a sweep over them compiles once); the rest of
     `options` is static.
@@ -431,41 +564,61 @@ def walk_lane(mesh: SurfaceMesh, P, L, face, ab0, found, eta, options: Walk,
     way only; on steep waves the first choice is wrong for some lanes (the exhaustive
     reference finds a solution behind `M0`), `test_walk_turns_back_when_the_first_direction_fails`.
     """
-    (can_flip, state), other = _first_triangle(
-        mesh, P, L, face, ab0, found, eta, tol, options.ellipse_samples)
-    illinois = options.bracket == "illinois"
-
-    def body(c):
-        s, turned = c
-        nxt = _step(mesh, P, L, eta, tol, illinois, s)
-        nxt = jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
-        failed = (nxt.mode == DONE) & (nxt.status != Status.FOUND) & can_flip & ~turned
-        restart = other._replace(steps=nxt.steps, crossed=nxt.crossed)
-        nxt = jax.tree.map(lambda r, n: jnp.where(failed, r, n), restart, nxt)
-        return nxt, turned | failed
-
-    state, _ = jax.lax.while_loop(
-        lambda c: (c[0].mode != DONE) & (c[0].steps < max_steps), body, (state, jnp.asarray(False)))
-    capped = state.mode != DONE
-    return state._replace(status=jnp.where(capped, Status.MAX_STEPS, state.status).astype(jnp.int32))
+    lane, is_ellipse, ellipse = walk_init(mesh, P, L, face, ab0, found, eta, tol, options)
+    lane = jax.tree.map(lambda a, b: jnp.where(is_ellipse, a, b), walk_ellipse(mesh, eta, options, lane, ellipse), lane)
+    lane = jax.lax.while_loop(lambda c: _running(c.state, max_steps),
+                              lambda c: walk_advance(mesh, eta, tol, options, c), lane)
+    return _capped(lane.state)
 
 
-@functools.partial(jax.jit, static_argnames=("options",))
-def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk) -> Solution:
+def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk) -> _State:
+    """The "pool" scheduler (module docstring): first triangles of the lanes with a start
+    point, the ellipse samples of the lanes that need them, then the slot pool."""
+    slots = pool_slots()
+
+    def init(p, l, f, a, ok):
+        return walk_init(mesh, p, l, f, a, ok, eta, tol, options)
+
+    # Lanes without a start point keep this: NO_CROSSING, no steps (as `_first_triangle` ends them).
+    shapes = jax.eval_shape(jax.vmap(init), P, L, face, ab0, found)
+    lanes, is_ellipse, ellipse = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
+    lanes = lanes._replace(state=lanes.state._replace(mode=jnp.full_like(lanes.state.mode, DONE),
+                                                      status=jnp.full_like(lanes.state.status, Status.NO_CROSSING)))
+    lanes, is_ellipse, ellipse = map_where(init, found, (lanes, is_ellipse, ellipse), P, L, face, ab0, found,
+                                           chunk=slots)
+    lanes = map_where(lambda lane, e: walk_ellipse(mesh, eta, options, lane, e), is_ellipse, lanes, lanes, ellipse,
+                      chunk=slots)
+
+    # A walking lane and a refining one compute different branches of a step: each runs in
+    # its own pool (WALK = 0, BISECT = 1), so no lane pays for the other branch.
+    def route(lane):
+        return jnp.where(_running(lane.state, max_steps), lane.state.mode, -1).astype(jnp.int32)
+
+    steps = tuple(lambda lane, m=m: walk_advance(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT))
+    lanes = run_pools(steps, route, lanes, slots)
+    return _capped(lanes.state)
+
+
+def _walk_block(mesh, eta, tol, max_steps, P, L, face, ab0, found, options: Walk) -> Solution:
+    """One device's share of a block of lanes (`lanes.on_devices`)."""
     eta = jnp.asarray(eta, mesh.dtype)
     tol = jnp.asarray(tol, mesh.dtype)
-    states = map_lanes(
-        lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps),
-        P, L, face, ab0, found)
+    if options.scheduler == "pool":
+        states = _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options)
+    else:
+        states = map_lanes(
+            lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps),
+            P, L, face, ab0, found)
     V, N = mesh.triangle(states.face)
     residual = signed_sine(V, N, P, L, states.best_ab, eta, orientation="plane")
+    status = confirm_found(states.status, residual, tol)
     V0, _ = mesh.triangle(face)
     return Solution(
         point=jnp.where(found[:, None], barycentric_point(V, states.best_ab), 0),
         triangle=jnp.where(found, states.face, -1),
         barycentric=jnp.where(found[:, None], states.best_ab, 0),
-        found=states.status == Status.FOUND,
-        status=states.status,
+        found=status == Status.FOUND,
+        status=status,
         iterations=states.steps,
         residual=jnp.where(found, residual, 0),
         crossed=states.crossed,
@@ -474,8 +627,10 @@ def _walk_batch(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk
 
 
 def solve_walk(mesh: SurfaceMesh, P, L, eta, start, options: Walk) -> Solution:
-    """The walk on a padded batch: `mesh` from `lanes.padded_mesh`, lanes from
-    `lanes.pad_lanes`, `start = (face, barycentric, found)`; `eta` a float."""
+    """The walk on one block of lanes (`solve` runs every batch in blocks of one size, split
+    over the local devices): `mesh` from `lanes.padded_mesh`, `start = (face, barycentric,
+    found)`, `eta` a float."""
     face, ab0, found = start
-    return _walk_batch(mesh, P, L, face, ab0, found, eta, options.tolerance(mesh.dtype),
-                       jnp.int32(options.max_steps), options.static())
+    shared = (mesh, jnp.asarray(eta, mesh.dtype), jnp.asarray(options.tolerance(mesh.dtype), mesh.dtype),
+              jnp.int32(options.max_steps))
+    return on_devices(_walk_block, options.static(), shared, (P, L, face, ab0, found))

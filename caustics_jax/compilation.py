@@ -1,0 +1,60 @@
+"""JAX's persistent compilation cache, on by default (DESIGN.md "Performance methodology").
+
+A solver program takes seconds to compile (docs/solvers.md "Throughput"); the cache keeps
+compiled programs on disk between processes, so a second `caustics-jax compare`, test run
+or notebook reuses them. `enable_compilation_cache()` runs at the first `solve` (not at
+import: importing the package changes no JAX setting) and sets
+`jax_compilation_cache_dir` unless the user has already set one:
+
+- default directory `$XDG_CACHE_HOME/caustics_jax/jax` (`~/.cache/caustics_jax/jax`);
+- `CAUSTICS_JAX_COMPILATION_CACHE=0` (or `off`, `false`, `no`) leaves the cache off;
+- `CAUSTICS_JAX_COMPILATION_CACHE=/some/dir` puts it there.
+
+JAX caches only programs that took at least `jax_persistent_cache_min_compile_time_secs`
+(1 s by default) to compile, i.e. the solvers, not the small eager kernels. The cache is
+trusted code: keep it in a directory only you can write (JAX's warning for
+`jax.config.update("jax_compilation_cache_dir", ...)`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import jax
+
+#: Environment variable: "0"/"off"/"false"/"no" disables the cache, a path relocates it.
+ENV = "CAUSTICS_JAX_COMPILATION_CACHE"
+_OFF = ("0", "off", "false", "no")
+_done = False
+
+
+def cache_dir() -> Path | None:
+    """Where the cache goes (None: off), from `CAUSTICS_JAX_COMPILATION_CACHE` (module docstring)."""
+    value = os.environ.get(ENV, "").strip()
+    if value.lower() in _OFF:
+        return None
+    if value and value.lower() not in ("1", "on", "true", "yes"):
+        return Path(value).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "caustics_jax" / "jax"
+
+
+def enable_compilation_cache() -> Path | None:
+    """Point JAX's persistent compilation cache at `cache_dir()` once per process, unless a
+    directory is already configured (then that one is kept) or the cache is turned off.
+    Returns the directory in use (None when off). An unwritable directory leaves it off."""
+    global _done
+    current = jax.config.jax_compilation_cache_dir
+    if _done or current:
+        return Path(current) if current else None
+    _done = True
+    path = cache_dir()
+    if path is None:
+        return None
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    return path

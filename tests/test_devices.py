@@ -1,0 +1,88 @@
+"""Lanes spread over every local device: two host devices give the per-lane results of one.
+
+The two-device run happens in a subprocess (`XLA_FLAGS=--xla_force_host_platform_device_count=2`
+must be set before JAX starts); it writes its results to an .npz that this process compares,
+array for array, with the same solves on its single device. The subprocess uses blocks of
+256 lanes per device (`CAUSTICS_JAX_BLOCK_LANES`), so its 600 lanes span two blocks of 512
+(each split in two device shares) while this process runs them in one block of the default
+size: per-lane results depend neither on the device count nor on the blocking.
+"""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import caustics_jax as cj
+
+ROOT = Path(__file__).resolve().parents[1]
+N_LANES = 600
+RUNS = {  # name -> (method options, irradiance?)
+    "walk": ({"method": "walk"}, False),
+    "newton": ({"method": "newton"}, False),  # optimistix: one program per device (lanes.on_devices)
+    "newton_one_step": ({"method": "newton", "stepping": "one_step"}, False),
+    "irradiance": ({"method": "walk"}, True),
+}
+
+SCRIPT = textwrap.dedent("""
+    import sys
+    import jax
+    import numpy as np
+    import caustics_jax as cj
+    from caustics_jax.lanes import lanes_per_block
+    sys.path.insert(0, {tests!r})
+    from test_devices import RUNS, scene, run
+    assert len(jax.local_devices()) == 2, jax.local_devices()
+    assert lanes_per_block() == 512
+    out = {{}}
+    for dtype in ("float32", "float64"):
+        mesh, P, L = scene(dtype)
+        for name in RUNS:
+            for key, value in run(name, mesh, P, L).items():
+                out[f"{{dtype}}/{{name}}/{{key}}"] = value
+    np.savez(sys.argv[1], **out)
+""")
+
+
+def scene(dtype):
+    """600 receivers under a point light on a 2048-triangle wavy pool."""
+    sc = cj.scenes.wavy_pool(2048, amplitude=0.06, n_receivers=25, dtype=dtype)
+    P = np.asarray(sc.receivers)[:N_LANES]
+    return sc.surface, P, np.asarray(sc.lights.endpoint(P))
+
+
+def run(name, mesh, P, L) -> dict:
+    options, irradiance = RUNS[name]
+    with cj.precision(mesh.dtype):
+        if irradiance:
+            E, sol = cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0, 0, 1], return_solution=True,
+                                   **options)
+            return {"E": np.asarray(E), "status": np.asarray(sol.status)}
+        sol = cj.solve(mesh, P, L, **options)
+    return {k: np.asarray(getattr(sol, k)) for k in ("status", "point", "barycentric", "iterations", "crossed")}
+
+
+@pytest.fixture(scope="module")
+def two_devices(tmp_path_factory):
+    out = tmp_path_factory.mktemp("devices") / "two.npz"
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu",
+           "CAUSTICS_JAX_BLOCK_LANES": "256", "JAX_ENABLE_X64": "1"}
+    script = SCRIPT.format(tests=str(ROOT / "tests"))
+    proc = subprocess.run([sys.executable, "-c", script, str(out)], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=1500)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    return dict(np.load(out))
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@pytest.mark.parametrize("name", list(RUNS))
+def test_two_host_devices_give_the_lanes_of_one(two_devices, name, dtype):
+    mesh, P, L = scene(dtype)
+    one = run(name, mesh, P, L)
+    assert (one["status"] == cj.Status.FOUND).mean() > 0.95
+    for key, value in one.items():
+        np.testing.assert_array_equal(two_devices[f"{dtype}/{name}/{key}"], value, err_msg=f"{name} {key}")

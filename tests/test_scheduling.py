@@ -1,0 +1,147 @@
+"""Lane scheduling (`caustics_jax.lanes`): the slot pool against the chunked scheduler,
+compaction of rare work, fixed-size blocks (one compile whatever the lane count), and the
+persistent compilation cache's settings.
+
+The scheduler comparison runs 4096 lanes of the default pool's receivers (a floor grid
+under the point light of `scenes.wavy_pool`) on a 2048-triangle pool in both dtypes.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from caustics_jax import Newton, Walk, compilation, scenes, solve
+from caustics_jax.lanes import map_where, run_blocks, run_pool
+
+DTYPES = ["float32", "float64"]
+FIELDS = ("status", "point", "barycentric", "triangle", "iterations", "crossed", "residual", "start_point")
+SOLVERS = {
+    "walk": lambda **kw: Walk(**kw),
+    "newton": lambda **kw: Newton(**kw),
+    "newton-one-step": lambda **kw: Newton(stepping="one_step", **kw),
+}
+
+
+@functools.cache
+def _pool(dtype):
+    """4096 receivers of the default pool's layout (64 x 64 floor grid, one point light)."""
+    sc = scenes.wavy_pool(2048, n_receivers=64, dtype=dtype)
+    return sc.surface, np.asarray(sc.receivers), np.asarray(sc.lights.endpoint(sc.receivers))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("solver", list(SOLVERS))
+def test_slot_pool_gives_the_lanes_of_the_chunked_scheduler(solver, dtype):
+    """Same per-lane iteration, another schedule: statuses, points, iteration counts and
+    crossings are bit-identical (the pool's 256 slots vmap the step at the chunks' width;
+    `lanes.pool_slots`)."""
+    mesh, P, L = _pool(dtype)
+    assert len(P) == 4096
+    pool = solve(mesh, P, L, method=SOLVERS[solver](scheduler="pool"))
+    chunked = solve(mesh, P, L, method=SOLVERS[solver](scheduler="chunked"))
+    assert np.asarray(pool.found).mean() > 0.99, pool.summary()
+    for name in FIELDS:
+        np.testing.assert_array_equal(np.asarray(getattr(pool, name)), np.asarray(getattr(chunked, name)),
+                                      err_msg=name)
+
+
+def test_run_pool_equals_a_per_lane_while_loop():
+    """Lanes need 0 to 40 steps; 8 slots serve 300 lanes. Every lane ends exactly as in its
+    own loop, and lanes that are not running come back untouched."""
+    rng = np.random.default_rng(0)
+    need = jnp.asarray(rng.integers(0, 41, 300), jnp.int32)
+    x0 = jnp.asarray(rng.integers(0, 1000, (300, 2)), jnp.int32)
+
+    def step(c):  # integer arithmetic: exact at any vector width
+        x, k, n = c
+        x = jnp.stack([(3 * x[0] + x[1]) % 10007, (x[1] + k * x[0]) % 10009])
+        return (x, k + 1, n), k + 1 >= n
+
+    def alone(x, n):
+        return jax.lax.while_loop(lambda c: c[1] < c[2], lambda c: step(c)[0], (x, jnp.int32(0), n))
+
+    want = jax.vmap(alone)(x0, need)
+    got = jax.jit(lambda s, r: run_pool(step, s, r, 8))((x0, jnp.zeros(300, jnp.int32), need), need > 0)
+    for w, g in zip(want, got, strict=True):
+        np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
+    np.testing.assert_array_equal(np.asarray(got[1]), np.asarray(need))
+
+
+def test_map_where_computes_only_the_needed_lanes():
+    """`fn` replaces exactly the needed lanes; its trips scale with their count (a chunk of
+    16 over 1000 lanes of which 40 need it: 3 trips, traced once)."""
+    calls = []
+
+    def fn(x):
+        calls.append(x.shape)
+        return x * 2 + 1
+
+    need = np.zeros(1000, bool)
+    need[np.random.default_rng(1).choice(1000, 40, replace=False)] = True
+    x = jnp.arange(1000.0)
+    out = jax.jit(lambda n, x: map_where(fn, n, jnp.full(1000, -1.0), x, chunk=16))(jnp.asarray(need), x)
+    np.testing.assert_array_equal(np.asarray(out), np.where(need, 2 * np.arange(1000.0) + 1, -1.0))
+    assert calls == [()]  # traced once, per lane (vmapped)
+
+
+def test_run_blocks_pads_the_last_block_and_cuts_it_back():
+    seen = []
+
+    def fn(a, b):
+        seen.append((a.shape, b.shape, np.asarray(a)[-1], np.asarray(b)[-1]))
+        return {"s": a + b[:, 0]}
+
+    a, b = np.arange(10.0), np.ones((10, 2))
+    out = run_blocks(fn, (a, b), (np.float64(-7), np.zeros(2)), size=4)
+    np.testing.assert_array_equal(out["s"], a + 1)
+    assert [s[:2] for s in seen] == [((4,), (4, 2))] * 3
+    assert seen[-1][2] == -7.0 and np.all(seen[-1][3] == 0)  # the padding rows
+
+
+@pytest.mark.parametrize("method", ["walk", "newton", "newton-one-step"])
+def test_a_new_lane_count_compiles_nothing(method, monkeypatch):
+    """Lanes run in fixed-size blocks (256 here, `CAUSTICS_JAX_BLOCK_LANES`), so a second
+    call with another lane count (1 block, then 3) traces and compiles nothing: no jit
+    cache miss, no XLA compile, no program loaded from the persistent cache."""
+    monkeypatch.setenv("CAUSTICS_JAX_BLOCK_LANES", "256")
+    mesh, P, L = _pool("float32")
+    events = []
+
+    def on_duration(event, *_, **__):
+        if event.startswith("/jax/core/compile/"):
+            events.append(event)
+
+    def on_event(event, **_):
+        if event == "/jax/compilation_cache/cache_hits":
+            events.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(on_duration)
+    jax.monitoring.register_event_listener(on_event)
+    try:
+        solve(mesh, P[:200], L[:200], method=SOLVERS[method]())
+        assert events, "the first call compiles (nothing was counted: is the listener wired?)"
+        events.clear()
+        sol = solve(mesh, P[:700], L[:700], method=SOLVERS[method]())
+        assert events == []
+    finally:
+        jax.monitoring.unregister_event_duration_listener(on_duration)
+        jax.monitoring.unregister_event_listener(on_event)
+    assert np.asarray(sol.found).shape == (700,) and np.asarray(sol.found).mean() > 0.99
+
+
+@pytest.mark.parametrize("value, expected", [("0", None), ("off", None), ("False", None),
+                                             ("/tmp/cj-cache", "/tmp/cj-cache"), ("1", "default"), (None, "default")])
+def test_compilation_cache_directory_from_the_environment(value, expected, monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    if value is None:
+        monkeypatch.delenv(compilation.ENV, raising=False)
+    else:
+        monkeypatch.setenv(compilation.ENV, value)
+    got = compilation.cache_dir()
+    if expected == "default":
+        assert got == tmp_path / "caustics_jax" / "jax"
+    else:
+        assert (None if got is None else str(got)) == expected
