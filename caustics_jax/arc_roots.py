@@ -72,8 +72,10 @@ given, for the curve defined by the float64 pieces `a_h, b_h, q` (the conic's ro
 a perturbation of relative size eps of the input) -- none is missed, and each isolated
 root is unique in its interval. The pieces must cover the curve inside the face
 (`arcs.face_arcs` from every edge root, plus an ellipse inside the face, anchored here
-on the line through its centre); exact edge and vertex roots belong to both faces and
-are found at the end of an arc piece (undecided up to `max_depth`, then a candidate).
+on the line through its centre; an arc on one line of a conic that is a line pair, where
+the pencil through its start sweeps only the other line, as the segment,
+`chord_on_conic`); exact edge and vertex roots belong to both faces and are found at the
+end of an arc piece (undecided up to `max_depth`, then a candidate).
 """
 
 from __future__ import annotations
@@ -85,7 +87,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .arcs import INWARD, edge_roots, next_crossing, orientation
+from .arcs import INWARD, edge_roots, next_crossing, on_tangent_line, orientation
 from .conic import conic_tangent, solve_quadratic
 from .objectives import path_vectors
 
@@ -97,6 +99,10 @@ ROUNDING_ULPS = 4096
 #: Arc pieces per arc (each arc's pencil angle range is cut in `PIECES` equal parts, each
 #: below pi/2).
 PIECES = 2
+#: A chord between two curve points lies on the conic when `|d^T S2 d|` is within this
+#: many eps of `|A| d_a^2 + |B| d_b^2 + |C| |d_a d_b|` (`chord_on_conic`): the relative
+#: tolerance of `arcs.next_crossing`'s "on the tangent line".
+STRAIGHT_ULPS = 1000
 
 
 def _product_weights(m: int, n: int) -> np.ndarray:
@@ -147,7 +153,8 @@ class ArcPiece(NamedTuple):
         phi_lo, phi_hi: the piece's pencil angles (`phi_hi - phi_lo < pi/2`); on a straight
             conic, the fractions of the segment `anchor -> end` instead.
         end: `(..., 2)` the arc's end (used by straight conics only).
-        straight: the conic is a line (`FaceArcs.straight`).
+        straight: the piece is a segment: the conic is a line (`is_straight`), or the arc
+            lies on one line of a line pair (`chord_on_conic`, `pieces_of_arc`).
         ok: the piece exists.
     """
 
@@ -162,7 +169,17 @@ class ArcPiece(NamedTuple):
 
 
 def pieces_of_arc(anchor, tau, perp, phi_end, end, straight, ok) -> ArcPiece:
-    """The `PIECES` pieces `(PIECES, ...)` of one arc from `anchor` to pencil angle `phi_end`."""
+    """The `PIECES` pieces `(PIECES, ...)` of one arc from `anchor` to pencil angle `phi_end`.
+
+    An arc whose end lies ahead on the tangent line at `anchor` (`arcs.on_tangent_line`,
+    where `next_crossing` puts it at pencil angle `eps |end - anchor|`) is the straight
+    segment to `end`, whatever `straight` says: a line meeting a conic at a point of
+    tangency and at one more point lies on the conic (it meets it three times, counted
+    with multiplicity), so the conic is a line pair there, and the pencil through a
+    point of one line sweeps the other line only (see `chord_on_conic`)."""
+    v = end - anchor
+    scale = jnp.sum(jnp.abs(end)) + jnp.sum(jnp.abs(anchor))
+    straight = straight | (on_tangent_line(v @ perp, jnp.linalg.norm(v), scale) & (v @ tau > 0))
     k = jnp.arange(PIECES, dtype=anchor.dtype)
     span = jnp.where(straight, 1, phi_end)
     rep = lambda x: jnp.broadcast_to(x, (PIECES,) + jnp.shape(x))  # noqa: E731
@@ -188,6 +205,29 @@ def interior_ellipse(coef):
     return anchor, tau, perp, ellipse & inside & s_ok[0] & ~jnp.any(valid)
 
 
+def chord_on_conic(coef, anchor, end):
+    """The chord from curve point `anchor` to curve point `end` lies on the conic (to
+    rounding): the conic is a line pair and the arc between them is the segment.
+
+    On the line `anchor + u d`, `d = end - anchor`, the conic (seed 001 eq. 12) is the
+    quadratic `kappa u^2 + (g . d) u + Q(anchor)` with `kappa = d^T S2 d` (`S2` its
+    quadratic part, `g` its gradient at `anchor`); it vanishes at `u = 0` and `u = 1`, so
+    it is `kappa u (u - 1)`, and the whole line lies on the conic exactly when
+    `kappa = 0`. A conic containing a line is degenerate: a pair of lines, as on every face
+    of a surface whose vertex normals lie in one plane together with `PL` (a single wave,
+    a receiver under a point light, `tests/test_exhaustive.py`). The pencil through a
+    point of one line meets the conic again only on the other line (every line through
+    it but the line itself), so it cannot parametrise that arc: it is taken as the
+    segment. Tolerance: `|kappa| <= STRAIGHT_ULPS eps (|A| d_a^2 + |B| d_b^2 + |C| |d_a d_b|)`,
+    which a curved arc meets only within `~STRAIGHT_ULPS eps |d|` of its chord."""
+    A, B, C = coef[0], coef[1], coef[2]
+    d = end - anchor
+    kappa = A * d[0] * d[0] + B * d[1] * d[1] + C * d[0] * d[1]
+    size = jnp.abs(A) * d[0] * d[0] + jnp.abs(B) * d[1] * d[1] + jnp.abs(C * d[0] * d[1])
+    eps = jnp.finfo(coef.dtype).eps
+    return (jnp.abs(kappa) <= STRAIGHT_ULPS * eps * size) & jnp.any(d != 0)
+
+
 def is_straight(coef):
     """The conic is a line (`A = B = C = 0` to rounding: constant normals), as `face_arcs`."""
     return jnp.max(jnp.abs(coef[:3])) <= 64 * jnp.finfo(coef.dtype).eps * jnp.max(jnp.abs(coef))
@@ -202,7 +242,8 @@ def face_pieces(coef) -> ArcPiece:
     Each arc between two edge roots is listed from both ends; the copy from the root of
     larger index is marked not `ok` when the reverse arc exists and ends back at it
     (the end root's index is found by exact equality of its parameter: `next_crossing`
-    returns one of the roots as computed). Where that is not certain both copies stay."""
+    returns one of the roots as computed). Where that is not certain both copies stay.
+    An arc whose chord lies on the conic (`chord_on_conic`: a line pair) is the segment."""
     roots = edge_roots(coef)
     t_all, valid_all, ab_all = roots
     straight = is_straight(coef)
@@ -212,10 +253,10 @@ def face_pieces(coef) -> ArcPiece:
         tau, perp, ok, k_end, t_end, end, phi = arc_from_point(coef, x, inward(k, coef.dtype), k, t_all[k, j])
         same = valid_all[k_end] & (t_all[k_end] == t_end)
         end_index = jnp.where(jnp.any(same), 2 * k_end + jnp.argmax(same), -1)
-        return x, tau, perp, jnp.where(ok, phi, 0), end, valid_all[k, j] & ok, end_index
+        return x, tau, perp, jnp.where(ok, phi, 0), end, valid_all[k, j] & ok, end_index, chord_on_conic(coef, x, end)
 
     k, j = jnp.repeat(jnp.arange(3), 2), jnp.tile(jnp.arange(2), 3)
-    anchor, tau, perp, phi_end, end, ok, end_index = jax.vmap(from_root)(k, j)
+    anchor, tau, perp, phi_end, end, ok, end_index, chord = jax.vmap(from_root)(k, j)
     own = jnp.arange(6)
     e = jnp.maximum(end_index, 0)
     reverse_exists = (end_index >= 0) & ok[e] & (end_index[e] == own)
@@ -225,7 +266,7 @@ def face_pieces(coef) -> ArcPiece:
     anchor, tau, perp, end = cat(anchor, e_anchor), cat(tau, e_tau), cat(perp, e_perp), cat(end, e_anchor)
     phi_end = cat(phi_end, jnp.asarray(jnp.pi, coef.dtype))
     ok = cat(ok, e_ok & ~straight)
-    straight = jnp.broadcast_to(straight, ok.shape)
+    straight = straight | cat(chord, jnp.asarray(False))
     p = jax.vmap(pieces_of_arc)(anchor, tau, perp, phi_end, end, straight, ok)
     return jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), p)
 

@@ -102,11 +102,20 @@ def next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
     # `across` is noise while the sign of `along` is not. Without the absolute bound a
     # float32 root 1e-4 behind `e` read as "ahead at angle 1e-3" (arctan2(-0, -1) wraps
     # to 0), and the walk went the wrong way in both directions (issue 14 class 6).
-    on_tangent = (jnp.abs(across) <= 1e3 * eps * dist) | (jnp.abs(across) <= 64 * eps * scale)
+    on_tangent = on_tangent_line(across, dist, scale)
     phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
     phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
     i = jnp.argmin(phi)
     return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
+
+
+def on_tangent_line(across, dist, scale):
+    """A root at distance `dist` from the curve point `e`, `across` from the tangent line at
+    `e` (`(root - e) . perp`), lies on that tangent line to rounding (`next_crossing`):
+    `|across| <= 1e3 eps dist`, or `<= 64 eps scale` with `scale` the magnitude of the
+    barycentrics of both points (their absolute rounding)."""
+    eps = float(np.finfo(across.dtype).eps)
+    return (jnp.abs(across) <= 1e3 * eps * dist) | (jnp.abs(across) <= 64 * eps * scale)
 
 
 def project_to_conic(coef, q):

@@ -272,3 +272,32 @@ def test_certified_reference_equals_newton_started_from_every_face(scene):
         a, b = ex.all_points[i, : ex.count[i]], nocull.all_points[i, : nocull.count[i]]
         if len(a):
             assert np.linalg.norm(a[:, None] - b[None], axis=-1).min(1).max() < 1e-12
+
+
+def test_certified_reference_finds_every_path_of_a_receiver_under_the_light():
+    """Receiver 15 of the small steep pool's 6 x 6 grid lies straight under the point light
+    (`PL` vertical): with one wave every vertex normal lies in the vertical plane of the
+    wave's direction, which holds `PL`, so the conic of every face is a pair of lines
+    (`arc_roots.chord_on_conic`). The reference lost the path on face 183, whose arc lies on
+    one of them, until such arcs became segments: it must equal the paths Newton finds
+    started at the centroid of every face (3, measured)."""
+    sc = scenes.wavy_pool(512, half_size=0.6, amplitude=0.1, n_waves=1, wavelength=(0.6, 0.6), n_receivers=6,
+                          depth=1.0, light_position=(0.1, -0.1, 3.0), dtype="float64")
+    mesh = sc.surface
+    P = np.asarray(sc.receivers)[[15]]
+    L = np.asarray(sc.lights.endpoint(P))
+    ex = solve(mesh, P, L, method="exhaustive", return_all=True, cull=False)
+    assert_all_points_are_distinct_solutions(mesh, ex, P, L)
+    F = mesh.faces.shape[0]
+    start = (np.arange(F, dtype=np.int32), np.full((F, 2), 1 / 3), np.ones(F, bool))
+    newton = solve(mesh, np.repeat(P, F, 0), np.repeat(L, F, 0), method="newton", start=start)
+    found = np.asarray(newton.found)
+    err = refraction_angle_error(mesh, np.asarray(newton.triangle)[found], np.asarray(newton.barycentric)[found],
+                                 np.repeat(P, found.sum(), 0), np.repeat(L, found.sum(), 0), ETA)
+    distinct: list[np.ndarray] = []
+    for q in np.asarray(newton.point)[found][err < 1e-6]:  # forward rays only
+        if all(np.linalg.norm(q - r) > DEDUPE for r in distinct):
+            distinct.append(q)
+    assert len(distinct) == 3 and ex.count[0] == 3, (distinct, ex.all_points)
+    d = np.linalg.norm(np.asarray(distinct)[:, None] - ex.all_points[0][None], axis=-1).min(1)
+    assert np.all(d < PLANTED_TOL), d  # measured

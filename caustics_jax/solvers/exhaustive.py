@@ -10,7 +10,8 @@ For each lane (P, L):
 2. **Arcs.** Every arc of the coplanarity conic inside a surviving face
    (`arcs.face_arcs`: from each edge root, oriented inward, to the next crossing along
    the curve; plus an ellipse inside the face, anchored on the line through its centre),
-   each cut into two pieces (`arc_roots.face_pieces`).
+   each cut into two pieces (`arc_roots.face_pieces`); an arc on one line of a conic that
+   is a line pair is the segment (`arc_roots.chord_on_conic`).
 3. **Certified isolation.** On each piece the refraction condition becomes a polynomial
    `G` of degree 12 in the Bernstein basis (`arc_roots.arc_polynomial`) whose roots
    contain every solution; Bernstein subdivision with rounding bounds isolates every
