@@ -53,7 +53,7 @@ import numpy as np  # noqa: E402
 from caustics_jax import Newton, Walk, compare, prepare, solve  # noqa: E402
 from caustics_jax.lanes import lanes_per_block, pool_slots  # noqa: E402
 from caustics_jax.solvers.newton import newton_init, newton_iteration  # noqa: E402
-from caustics_jax.solvers.walk import BISECT, WALK, walk_advance, walk_init  # noqa: E402
+from caustics_jax.solvers.walk import BISECT, WALK, walk_advance, walk_ellipse, walk_init  # noqa: E402
 from experiments.common import figures_dir, log, parse_args, use_agg, write_json  # noqa: E402
 
 CONFIGS = {
@@ -124,7 +124,11 @@ def lane_flops(solver, mesh, P, L, start, eta: float = 1.333) -> dict:
     P, L = P[:WIDTH], L[:WIDTH]
     if isinstance(solver, Walk):
         def init(ellipse):
-            return lambda p, l, f, a, ok: walk_init(mesh, p, l, f, a, ok, eta, tol, solver, ellipse)[0]
+            def first(p, l, f, a, ok):
+                lane, _, samples = walk_init(mesh, p, l, f, a, ok, eta, tol, solver)
+                # with the ellipse samples: what the chunked scheduler computes for every lane
+                return walk_ellipse(mesh, eta, solver, lane, samples) if ellipse else lane
+            return first
         lanes = jax.jit(jax.vmap(init(False)))(P, L, face, ab0, found)
         return {"init": _flops(init(False), P, L, face, ab0, found),
                 "init_full": _flops(init(True), P, L, face, ab0, found),
@@ -188,7 +192,7 @@ def ellipse_lanes(solver, mesh, P, L, start, eta: float = 1.333) -> np.ndarray:
         return np.zeros(P.shape[0], bool)
     dtype = mesh.dtype
     eta, tol = jnp.asarray(eta, dtype), jnp.asarray(solver.tolerance(dtype), dtype)
-    fn = jax.jit(jax.vmap(lambda p, l, f, a, ok: walk_init(mesh, p, l, f, a, ok, eta, tol, solver, False)[1]))
+    fn = jax.jit(jax.vmap(lambda p, l, f, a, ok: walk_init(mesh, p, l, f, a, ok, eta, tol, solver)[1]))
     return np.asarray(fn(P, L, *start)) & np.asarray(start[2])
 
 

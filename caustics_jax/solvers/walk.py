@@ -66,7 +66,7 @@ from ..objectives import ObjectiveStatus, bracket_objective, path_vectors, signe
 from ._solution import Solution, Status, confirm_found
 from .options import SolverOptions, check_choice, check_int, check_tol, default_tol
 
-__all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_init", "walk_lane"]
+__all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_ellipse", "walk_init", "walk_lane"]
 
 WALK, BISECT, DONE = 0, 1, 2
 SCHEDULERS = ("pool", "chunked")
