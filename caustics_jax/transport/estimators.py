@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..lanes import lanes_per_block
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
 from ..prepared import PreparedSurface, prepare
@@ -168,18 +169,27 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
     if hit.size:
         g = jnp.asarray(hit)
         E_path[hit] = _path_irradiance(prep.mesh, face[hit], ab[hit], P[g], L[g], eta, I_e[hit], n_P[hit], sigma_t)
+    # The trials run in rounds: each active lane draws `m` fresh starts at once (enough to
+    # fill one block of `solve`, `lanes.lanes_per_block`), and its outcomes are read in
+    # order as the sequential loop would: the first recurrence ends the lane, a miss adds
+    # one to its count, the miss that takes the count past `max_trials` caps it. Starts
+    # drawn after a lane's end are discarded and not counted in `solves`.
     active = found.copy()
+    block = lanes_per_block()
     while active.any():
         idx = np.nonzero(active)[0]
-        g = jnp.asarray(idx)
-        f_t, M_t, _, _ = _newton_from(prep, P[g], L[g], eta, surface_starts(prep.mesh, idx.size, rng),
+        allowed = max_trials - trials[idx] + 1  # misses until the cap
+        m = int(max(1, min(block // idx.size, allowed.max())))
+        rep = np.repeat(idx, m)
+        g = jnp.asarray(rep)
+        f_t, M_t, _, _ = _newton_from(prep, P[g], L[g], eta, surface_starts(prep.mesh, rep.size, rng),
                                       newton_options)
-        solves[idx] += 1
-        again = f_t & (np.linalg.norm(M_t - M[idx], axis=-1) <= same_radius)
-        active[idx[again]] = False
-        missed = idx[~again]
-        trials[missed] += 1
-        capped = missed[trials[missed] > max_trials]
-        trials[capped] = 0
-        active[capped] = False
+        again = (f_t & (np.linalg.norm(M_t - M[rep], axis=-1) <= same_radius)).reshape(idx.size, m)
+        first = np.where(again.any(1), again.argmax(1), m)  # misses before the first recurrence
+        capped = first >= allowed
+        ended = ~capped & (first < m)
+        solves[idx] += np.where(capped, allowed, np.where(ended, first + 1, m))
+        trials[idx] += np.where(capped, 0, first)
+        trials[idx[capped]] = 0
+        active[idx[capped | ended]] = False
     return EstimatorResult(E_path * trials, solves, trials)
