@@ -105,11 +105,12 @@ def run_scene(data_dir, scene: str, work_dir, *, source: str | None = None, host
         paths[name].write_bytes(_hidden_lanes(e, chunk) if name == "lanes" else chunk)
     lanes = manifest["buffers"]["lanes"]
     out = work / f"{scene}.lanes.out.bin"
-    device, seconds = run_host(host, spv, paths["lanes"], out, lanes["count"], lanes["stride"],
+    device, timing = run_host(host, spv, paths["lanes"], out, lanes["count"], lanes["stride"],
                                (paths["scene"], paths["vertices"], paths["faces"]), repeat)
     got = sr.read_records(lanes, out.read_bytes())
     report = scene_report(manifest, buffers, got)
-    report["device"], report["dispatch_seconds"] = device, seconds
+    report["device"], report["dispatch_seconds"] = device, timing["wall"]
+    report["dispatch_cpu_seconds"] = timing["cpu"]
     return report
 
 

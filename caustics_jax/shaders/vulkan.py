@@ -75,18 +75,21 @@ def compile_shader(source: str, out: Path) -> Path:
     return out
 
 
-def host_output(stdout: str) -> tuple[str, float | None]:
-    """Device name and the fastest dispatch's wall time (s) from the host's stdout."""
+def host_output(stdout: str) -> tuple[str, dict]:
+    """Device name and the timing of the host's stdout: `{"wall": s, "cpu": s}` of the fastest
+    dispatch (wall time of submit to fence; the host process's CPU time over it, all threads,
+    which is the shader's own CPU time on a CPU driver such as lavapipe)."""
     lines = stdout.strip().splitlines()
-    seconds = None
+    timing = {"wall": None, "cpu": None}
     for line in lines[1:]:
-        if line.startswith("dispatch_seconds"):
-            seconds = float(line.split()[1])
-    return (lines[0] if lines else ""), seconds
+        key, *values = line.split()
+        if key in ("dispatch_seconds", "dispatch_cpu_seconds") and values:
+            timing["wall" if key == "dispatch_seconds" else "cpu"] = float(values[0])
+    return (lines[0] if lines else ""), timing
 
 
 def run_host(host: Path, spv: Path, records_in: Path, records_out: Path, count: int, stride: int,
-             extra=(), repeat: int = 1) -> tuple[str, float | None]:
+             extra=(), repeat: int = 1) -> tuple[str, dict]:
     """Run `spv` over `count` records of `stride` bytes (binding 0 in, 1 out; `extra` files
     at bindings 2, 3, ...), `repeat` dispatches; returns `host_output`. Unavailable when
     there is no Vulkan device, RuntimeError on any other failure."""
