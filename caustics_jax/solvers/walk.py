@@ -610,7 +610,12 @@ def _walk_block(mesh, eta, tol, max_steps, P, L, face, ab0, found, options: Walk
             lambda p, l, f, a, ok: walk_lane(mesh, p, l, f, a, ok, eta, options, tol, max_steps),
             P, L, face, ab0, found)
     V, N = mesh.triangle(states.face)
-    residual = signed_sine(V, N, P, L, states.best_ab, eta, orientation="plane")
+    # A found lane reports the `f` its acceptance test read at the returned point (the
+    # same point and formula: `bracket_objective`'s "plane" sine); evaluated again here at
+    # the block's vector width it can round across `tol` (1 lane in 32,768 of the default
+    # pool in float32 read 1.0015e-5 with tol 1e-5). Other lanes: `f` at their last point.
+    residual = jnp.where(states.status == Status.FOUND, states.best_f,
+                         signed_sine(V, N, P, L, states.best_ab, eta, orientation="plane"))
     status = confirm_found(states.status, residual, tol)
     V0, _ = mesh.triangle(face)
     return Solution(
