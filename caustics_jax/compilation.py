@@ -12,6 +12,11 @@ import: importing the package changes no JAX setting) and sets
 
 JAX caches only programs that took at least `jax_persistent_cache_min_compile_time_secs`
 (1 s by default) to compile, i.e. the solvers, not the small eager kernels. The cache is
+bounded (`MAX_BYTES`, least recently used entries evicted) unless the user set
+`jax_compilation_cache_max_size`; a bound also makes JAX lock the directory (`filelock`)
+around every read and write. Unbounded, JAX writes entries without a lock, so a process can
+read a program another one is still writing (two test workers, two runs started
+together): a pytest worker crashed while a second process compiled the same programs. The cache is
 trusted code: keep it in a directory only you can write (JAX's warning for
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 """
@@ -25,6 +30,8 @@ import jax
 
 #: Environment variable: "0"/"off"/"false"/"no" disables the cache, a path relocates it.
 ENV = "CAUSTICS_JAX_COMPILATION_CACHE"
+#: Bound of the cache directory (bytes): a few hundred solver programs.
+MAX_BYTES = 4 << 30
 _OFF = ("0", "off", "false", "no")
 _done = False
 
@@ -56,5 +63,7 @@ def enable_compilation_cache() -> Path | None:
         path.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
+    if jax.config.jax_compilation_cache_max_size == -1:  # JAX's default: unbounded, unlocked
+        jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)
     jax.config.update("jax_compilation_cache_dir", str(path))
     return path
