@@ -64,7 +64,10 @@ def measure(name: str, kwargs: dict, n_side: int, repeats: int = 3) -> dict:
         times = {False: [], True: []}
         E_walk = {}
         for vis in (False, True):  # compile
-            E_walk[vis] = np.asarray(irradiance(mesh, P, L, method="walk", visibility=vis, **kw))
+            E, sol = irradiance(mesh, P, L, method="walk", visibility=vis, return_solution=True, **kw)
+            E_walk[vis] = np.asarray(E)
+            if not vis:
+                walk_found, walk_status = int(np.sum(np.asarray(sol.found))), sol.summary()
         for _ in range(repeats):
             for vis in (False, True):
                 t = time.perf_counter()
@@ -75,17 +78,24 @@ def measure(name: str, kwargs: dict, n_side: int, repeats: int = 3) -> dict:
         "scene": name, "receivers": len(P), "paths": int(len(lane)), "paths_blocked": int((~visible).sum()),
         "removed_all_paths": float(1 - E_all_vis.sum() / total),
         "receivers_losing_light": int(np.sum(E_all_vis < E_all * (1 - 1e-12))),
-        "removed_walk": float(1 - E_walk[True].sum() / max(E_walk[False].sum(), 1e-300)),
+        # None where the walk finds no path at all (nothing to remove; 0/0 is not 100%).
+        "walk_found": walk_found, "walk_status": walk_status,
+        "walk_share_of_all_paths": float(E_walk[False].sum() / total),
+        "removed_walk": float(1 - E_walk[True].sum() / E_walk[False].sum()) if E_walk[False].sum() > 0 else None,
         "walk_ms": 1e3 * float(np.median(times[False])), "walk_visibility_ms": 1e3 * float(np.median(times[True])),
     }
 
 
 def table(rows) -> str:
-    lines = ["| scene | paths (256 receivers) | paths blocked | all-path irradiance removed | walk's removed "
-             "| walk irradiance ms: without / with visibility |", "|---|---|---|---|---|---|"]
+    lines = ["| scene | paths (all, per receivers) | paths blocked | all-path irradiance removed "
+             "| walk: lanes found, share of all-path irradiance | walk's removed "
+             "| walk irradiance ms: without / with visibility |", "|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['paths']} | {r['paths_blocked']} | {100 * r['removed_all_paths']:.2f}% "
-                     f"| {100 * r['removed_walk']:.2f}% | {r['walk_ms']:.0f} / {r['walk_visibility_ms']:.0f} |")
+        walk = "-" if r["removed_walk"] is None else f"{100 * r['removed_walk']:.2f}%"
+        share = 100 * r["walk_share_of_all_paths"]
+        lines.append(f"| {r['scene']} | {r['paths']} / {r['receivers']} | {r['paths_blocked']} "
+                     f"| {100 * r['removed_all_paths']:.2f}% | {r['walk_found']}, {share:.1f}% "
+                     f"| {walk} | {r['walk_ms']:.0f} / {r['walk_visibility_ms']:.0f} |")
     return "\n".join(lines)
 
 

@@ -49,7 +49,7 @@ from ..start_points import start_points
 from .options import SolverOptions, check_bool, check_int, check_real, check_tol
 from .solution_set import NO_ROOTS, ExhaustiveSolution, assemble, padded_call, piece_polynomials, refine_intervals
 
-__all__ = ["Exhaustive", "ExhaustiveSolution", "candidate_roots", "solve_exhaustive"]
+__all__ = ["Exhaustive", "ExhaustiveSolution", "candidate_pairs", "candidate_roots", "solve_exhaustive"]
 
 #: Arc pieces per face (`arc_roots.face_pieces`).
 N_PIECES = N_ARCS * PIECES
@@ -117,7 +117,7 @@ def _scan_pairs(mesh, P, L, faces):
 # --------------------------------------------------------------------------- host driver
 
 
-def _candidate_pairs(mesh, mesh_b, P, L, eta, cull: bool, chunk: int):
+def candidate_pairs(mesh, mesh_b, P, L, eta, cull: bool, chunk: int):
     """`(lane, face)` pairs to scan: the cone culling's, or (`cull=False`) every face whose
     conic meets it (on the padded mesh, whose padding faces never do)."""
     if cull:
@@ -164,7 +164,7 @@ def solve_exhaustive(mesh, P, L, eta, start, options: Exhaustive, padded=None):
         raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
     start = start if start is not None else start_points(mesh, P, L)
     mesh_b = padded if padded is not None else padded_mesh(mesh)
-    lanes, faces = _candidate_pairs(mesh, mesh_b, P, L, eta, options.cull, options.chunk)
+    lanes, faces = candidate_pairs(mesh, mesh_b, P, L, eta, options.cull, options.chunk)
     pair, M, ab, f, st = candidate_roots(mesh_b, P, L, eta, lanes, faces, options)
     ok = (np.abs(f) <= options.tol) & (st == ObjectiveStatus.OK)
     result = assemble(mesh, P, L, eta, start, options.tol, options.dedupe,
