@@ -45,7 +45,8 @@ _MESSAGES = {
         "degenerate input: singular conic at the start point, or P/L on the surface"),
     Status.LOST_CURVE: "the curve has no exit from the current triangle (tangency or rounding)",
     Status.NOT_CONVERGED: "the iteration stopped (bracket or step too small) above tolerance",
-    Status.NO_SOLUTION: "the exhaustive reference found no refraction point on the whole mesh",
+    Status.NO_SOLUTION: ("no refraction point: none on the whole mesh (exhaustive reference) or on the traced "
+                         "curve (solutions=\"all\" with the walk)"),
 }
 
 
