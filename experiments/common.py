@@ -1,5 +1,5 @@
 """What every experiment shares: the figures folder, the plotting backend, JSON output,
-progress lines, error statistics, and command-line parsing that survives Jupyter.
+progress lines, error statistics, median timing, and command-line parsing that survives Jupyter.
 
 Experiments run headless as modules from the repository root
 (`python -m experiments.stability`) or open as notebooks (jupytext `# %%` cells) with the
@@ -13,7 +13,9 @@ import json
 import math
 import pathlib
 import sys
+import time
 
+import jax
 import numpy as np
 
 from caustics_jax.reporting import log as log
@@ -27,6 +29,19 @@ def figures_dir() -> pathlib.Path:
     path = ROOT / "figures"
     path.mkdir(exist_ok=True)
     return path
+
+
+def median_time(fn, repeats: int = 1):
+    """`(result, seconds)`: one untimed call (compiles for these shapes, or loads from the
+    compilation cache), then the median wall time of `repeats` calls, each waited for
+    (`jax.block_until_ready`)."""
+    out = jax.block_until_ready(fn())
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t)
+    return out, float(np.median(times))
 
 
 def in_ipython() -> bool:

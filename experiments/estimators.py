@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 import caustics_jax as cj  # noqa: E402
 from caustics_jax import scenes  # noqa: E402
 from caustics_jax.transport import irradiance, sms_biased, sms_unbiased  # noqa: E402
-from experiments.common import figures_dir, parse_args, use_agg, write_json  # noqa: E402
+from experiments.common import figures_dir, median_time, parse_args, use_agg, write_json  # noqa: E402
 
 use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
@@ -69,17 +69,6 @@ def pool(name: str, n_side: int):
         return sc.surface, P, np.asarray(sc.lights.endpoint(P))
 
 
-def timed(fn, repeats: int = 1):
-    """`(result, seconds)`: a first call (compiles), then the median of `repeats` calls."""
-    out = fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return out, float(np.median(times))
-
-
 def rel_l2(E, ref):
     return float(np.linalg.norm(np.asarray(E, np.float64) - ref) / np.linalg.norm(ref))
 
@@ -100,30 +89,30 @@ def run_pool(name: str, n_side: int, seed: int = 0) -> dict:
     n = len(P)
     kw = dict(intensity=1.0, receiver_normal=UP)
     with cj.precision("float64"):
-        (E_ref, ref_sol), t_ref = timed(lambda: irradiance(mesh, P, L, method="exhaustive", all_paths=True,
+        (E_ref, ref_sol), t_ref = median_time(lambda: irradiance(mesh, P, L, method="exhaustive", all_paths=True,
                                                            return_solution=True, **kw))
         ref = cj.solve(mesh, P, L, method="exhaustive", return_all=True)
         E_ref = np.asarray(E_ref, np.float64)
         rows = [dict(method="exhaustive (reference)", param=None, us=1e6 * t_ref / n, err=0.0, recall=1.0)]
-        (E, sol), t = timed(lambda: irradiance(mesh, P, L, method="walk", return_solution=True, **kw))
+        (E, sol), t = median_time(lambda: irradiance(mesh, P, L, method="walk", return_solution=True, **kw))
         pts = [np.asarray(sol.point)[i:i + 1] if bool(sol.found[i]) else np.zeros((0, 3)) for i in range(n)]
         rows.append(dict(method="walk, one path", param=None, us=1e6 * t / n, err=rel_l2(E, E_ref),
                          recall=recall(pts, ref)))
-        (E, sol), t = timed(lambda: irradiance(mesh, P, L, method="newton", return_solution=True, **kw))
+        (E, sol), t = median_time(lambda: irradiance(mesh, P, L, method="newton", return_solution=True, **kw))
         pts = [np.asarray(sol.point)[i:i + 1] if bool(sol.found[i]) else np.zeros((0, 3)) for i in range(n)]
         rows.append(dict(method="Newton, one path", param=None, us=1e6 * t / n, err=rel_l2(E, E_ref),
                          recall=recall(pts, ref)))
-        E, t = timed(lambda: irradiance(mesh, P, L, method="walk", all_paths=True, **kw))
+        E, t = median_time(lambda: irradiance(mesh, P, L, method="walk", all_paths=True, **kw))
         tr = cj.solve(mesh, P, L, method="walk", solutions="all")
         rows.append(dict(method="walk, all paths", param=None, us=1e6 * t / n, err=rel_l2(E, E_ref),
                          recall=recall([tr.all_points[i, : tr.count[i]] for i in range(n)], ref)))
         for k in K_BIASED:
-            est, t = timed(lambda k=k: sms_biased(mesh, P, L, k=k, seed=seed, **kw))
+            est, t = median_time(lambda k=k: sms_biased(mesh, P, L, k=k, seed=seed, **kw))
             rows.append(dict(method="SMS biased", param=k, us=1e6 * t / n, err=rel_l2(est.irradiance, E_ref),
                              recall=float(np.sum(est.paths) / max(ref.count.sum(), 1))))
         for m in M_UNBIASED:
             rep = lambda X, m=m: np.repeat(X, m, 0)  # noqa: E731
-            est, t = timed(lambda m=m, rep=rep: sms_unbiased(mesh, rep(P), rep(L), seed=seed, **kw))
+            est, t = median_time(lambda m=m, rep=rep: sms_unbiased(mesh, rep(P), rep(L), seed=seed, **kw))
             E = est.irradiance.reshape(n, m).mean(1)
             rows.append(dict(method="SMS unbiased", param=m, us=1e6 * t / n, err=rel_l2(E, E_ref),
                              solves=float(est.solves.mean()), recall=None))

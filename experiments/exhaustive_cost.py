@@ -41,25 +41,13 @@ import caustics_jax as cj  # noqa: E402
 from caustics_jax import scenes  # noqa: E402
 from caustics_jax.lanes import padded_mesh  # noqa: E402
 from caustics_jax.solvers import exhaustive  # noqa: E402
-from experiments.common import figures_dir, parse_args, write_json  # noqa: E402
+from experiments.common import figures_dir, median_time, parse_args, write_json  # noqa: E402
 from experiments.estimators import POOLS, pool  # noqa: E402
 
 ETA = 1.333
 COST_MESHES = {"default wavy pool, 8192 triangles": 8192, "wavy pool, 100k triangles": 100_000}
 MATCH = {"float64": 1e-6, "float32": 1e-4}
 EXTRAPOLATE_LANES = 100_000
-
-
-def timed(fn, repeats: int):
-    """`(result, seconds)`: a first call (compiles for these shapes), then the median of
-    `repeats` calls."""
-    out = jax.block_until_ready(fn())
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t)
-    return out, float(np.median(times))
 
 
 def same_solutions(a, b, tol: float = 1e-9) -> bool:
@@ -87,7 +75,7 @@ def reference_cost(name: str, n_triangles: int, n_side: int, repeats: int) -> di
             # The (lane, face) pairs the reference scans (its own private helper, so the
             # count is exactly what the timed call works through).
             lanes, _ = exhaustive.candidate_pairs(mesh, mesh_b, P, L, ETA, cull, exhaustive.Exhaustive().chunk)
-            out[key], t = timed(lambda cull=cull: cj.solve(mesh, P, L, eta=ETA,
+            out[key], t = median_time(lambda cull=cull: cj.solve(mesh, P, L, eta=ETA,
                                                            method=cj.Exhaustive(cull=cull, return_all=True)), repeats)
             row[f"{key}_ms_per_lane"] = 1e3 * t / len(P)
             row[f"{key}_pairs_per_lane"] = len(lanes) / len(P)
@@ -119,7 +107,7 @@ def trace_recall(name: str, n_side: int, repeats: int) -> list[dict]:
     """Recall and time of the all-paths walk in float64 and float32 against the reference."""
     with cj.precision("float64"):
         mesh, P, L = pool(name, n_side)
-        ref, t_ref = timed(lambda: cj.solve(mesh, P, L, eta=ETA, method="exhaustive", return_all=True), repeats)
+        ref, t_ref = median_time(lambda: cj.solve(mesh, P, L, eta=ETA, method="exhaustive", return_all=True), repeats)
     counts = np.bincount(ref.count).tolist()
     rows = [{"pool": name, "method": "exhaustive (reference)", "dtype": "float64", "receivers": len(P),
              "paths_per_receiver": counts, "us_per_lane": 1e6 * t_ref / len(P), "recall": 1.0, "extra": 0,
@@ -128,7 +116,7 @@ def trace_recall(name: str, n_side: int, repeats: int) -> list[dict]:
         with cj.precision(dtype):
             m = mesh.astype(dtype)
             Pd, Ld = P.astype(dtype), L.astype(dtype)
-            tr, t = timed(lambda m=m, Pd=Pd, Ld=Ld: cj.solve(m, Pd, Ld, eta=ETA, method="walk", solutions="all"),
+            tr, t = median_time(lambda m=m, Pd=Pd, Ld=Ld: cj.solve(m, Pd, Ld, eta=ETA, method="walk", solutions="all"),
                           repeats)
         hit, total, extra, n_found = match(ref, tr, MATCH[dtype])
         per_lane = [match(_lane(ref, i), _lane(tr, i), MATCH[dtype]) for i in range(len(P))]

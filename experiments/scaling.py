@@ -28,7 +28,7 @@ import numpy as np
 import caustics_jax as cj
 from caustics_jax.compare import CONFIGS
 from caustics_jax.progress import progress
-from experiments.common import ROOT, log, parse_args, use_agg, write_json
+from experiments.common import ROOT, log, median_time, parse_args, use_agg, write_json
 
 use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
@@ -48,16 +48,6 @@ DTYPES = ("float32", "float64")
 GENERAL = {"features": None} if "features" in inspect.signature(cj.solve).parameters else {}
 
 
-def _median_time(fn, repeats):
-    jax.block_until_ready(fn())  # compile (or cache hit)
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t)
-    return out, float(np.median(times))
-
-
 def run(sizes=SIZES, dtypes=DTYPES, repeats=REPEATS) -> dict:
     rows = []
     steps = progress(total=len(sizes) * len(dtypes), desc="scaling", unit="mesh")
@@ -71,11 +61,11 @@ def run(sizes=SIZES, dtypes=DTYPES, repeats=REPEATS) -> dict:
                 F = int(sc.surface.faces.shape[0])
                 P = sc.receivers
                 L = sc.lights.endpoint(P)
-                start, t_start = _median_time(lambda sc=sc, P=P, L=L: cj.start_points(sc.surface, P, L), repeats)
+                start, t_start = median_time(lambda sc=sc, P=P, L=L: cj.start_points(sc.surface, P, L), repeats)
                 n = int(P.shape[0])
                 for name, (method, opts) in SOLVERS.items():
                     t = time.perf_counter()
-                    sol, t_solve = _median_time(
+                    sol, t_solve = median_time(
                         lambda m=method, o=opts, mesh=sc.surface, P=P, L=L, start=start: cj.solve(
                             mesh, P, L, method=m, start=start, **o, **GENERAL), repeats)
                     found = np.asarray(sol.found)
