@@ -25,7 +25,7 @@ $(DOCS_STAMP): $(STAMP)
 	touch $(DOCS_STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/caustics-jax demo --figure figures/solver_comparison.png --json figures/solver_comparison.json
+	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --hypothesis-profile=ci
@@ -41,7 +41,7 @@ figures: $(STAMP)
 	$(PY) -m experiments.stability
 	$(PY) -m experiments.scaling
 	$(PY) -m experiments.precision_agreement
-	$(VENV)/bin/caustics-jax demo --figure figures/solver_comparison.png --json figures/solver_comparison.json
+	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 # Execute every notebook headless (nbclient); fails on any cell error. A full run rewrites the
 # executed copies notebooks/*.ipynb; CAUSTICS_JAX_QUICK=1 (what CI runs) uses small lane and

@@ -35,7 +35,7 @@ def format_table(report: dict) -> str:
             f"{'ang max':>10}{'it med':>7}{'it p99':>7}{'compile':>9}{'solves/s':>11}")
     lines = [f"scene {report['scene']}, {report['n']} lanes "
              f"({report['lanes_crossing_surface']} cross the surface), "
-             f"backend {report['platform']}", head, "-" * len(head)]
+             f"backend {report['platform']} ({len(report.get('devices', [])) or 1} device(s))", head, "-" * len(head)]
     for r in report["rows"]:
         pos = r["position_error_m"] or {}
         ang = r["angle_error_rad"]
@@ -168,6 +168,10 @@ def warn_if_long_compare(cfg) -> str | None:
 
 
 def _compare(args) -> int:
+    if args.cpu_devices is not None:  # before any JAX work: the CPU backend reads it when it starts
+        from .lanes import use_cpu_devices
+
+        use_cpu_devices(_cpu_devices_arg(args.cpu_devices))
     cfg = cmp.CompareConfig(
         scene=args.scene, n_triangles=args.triangles, n=args.n, dtypes=tuple(args.dtype),
         configs=tuple(args.configs), ref_n=args.ref_n, sweep_n=args.sweep_n,
@@ -198,6 +202,15 @@ def _compare(args) -> int:
     return 0
 
 
+def _cpu_devices_arg(value: str) -> int | str:
+    if value == "all":
+        return value
+    try:
+        return int(value)
+    except ValueError:
+        raise ValueError(f"--cpu-devices must be a positive integer or 'all', got {value!r}") from None
+
+
 def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
     p.add_argument("--scene", default="wavy", metavar="NAME|PATH",
                    help=f"a named scene ({', '.join(sorted(cmp.SCENES))}) or a mesh file trimesh reads "
@@ -214,6 +227,9 @@ def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
     p.add_argument("--sweep-n", type=int, default=8192, help="lanes per Pareto sweep point")
     p.add_argument("--no-sweep", action="store_true", help="skip the tolerance sweep and figure")
     p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement")
+    p.add_argument("--cpu-devices", default=None, metavar="N|all",
+                   help="split the CPU into N JAX devices ('all': one per core) so every core runs lanes "
+                        "(default: JAX's one CPU device; `make demo` passes 'all')")
     p.add_argument("--eta", type=float, default=1.333)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", default=None, help="write the full results as JSON to this path (default: none)")

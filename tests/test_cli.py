@@ -87,6 +87,7 @@ def _one_line_error(capsys, *needles):
     (["--scene", "ocean"], "scene must be one of"), (["--configs", "walk", "nonsense"], "unknown solver configs"),
     (["--figure", "out.nothing"], "file type is set by the suffix"),
     (["--n", "abc"], "invalid int value"), (["--dtype", "float16"], "invalid choice"),
+    (["--cpu-devices", "0"], "positive integer or 'all'"), (["--cpu-devices", "two"], "positive integer or 'all'"),
 ])
 @pytest.mark.parametrize("command", ["compare", "demo"])
 def test_compare_user_errors_exit_2_with_one_line_before_the_run(no_run, capsys, command, argv, needle):

@@ -1,7 +1,7 @@
 """Lanes spread over every local device: two host devices give the per-lane results of one.
 
-The two-device run happens in a subprocess (`XLA_FLAGS=--xla_force_host_platform_device_count=2`
-must be set before JAX starts); it writes its results to an .npz that this process compares,
+The two-device run happens in a subprocess (`lanes.use_cpu_devices(2)`, what
+`caustics-jax compare --cpu-devices` calls, must run before JAX starts); it writes its results to an .npz that this process compares,
 array for array, with the same solves on its single device. The subprocess uses blocks of
 256 lanes per device (`CAUSTICS_JAX_BLOCK_LANES`), so its 600 lanes span two blocks of 512
 (each split in two device shares) while this process runs them in one block of the default
@@ -37,7 +37,8 @@ SCRIPT = textwrap.dedent("""
     import jax
     import numpy as np
     import caustics_jax as cj
-    from caustics_jax.lanes import lanes_per_block
+    from caustics_jax.lanes import lanes_per_block, use_cpu_devices
+    assert use_cpu_devices(2) == 2
     sys.path.insert(0, {tests!r})
     from test_devices import PAIRS, scene, run
     assert len(jax.local_devices()) == 2, jax.local_devices()
@@ -72,8 +73,8 @@ def run(name, mesh, P, L) -> dict:
 @pytest.fixture(scope="module")
 def two_devices(tmp_path_factory):
     out = tmp_path_factory.mktemp("devices") / "two.npz"
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu",
-           "CAUSTICS_JAX_BLOCK_LANES": "256", "JAX_ENABLE_X64": "1"}
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "CAUSTICS_JAX_BLOCK_LANES": "256", "JAX_ENABLE_X64": "1"}
+    env.pop("XLA_FLAGS", None)
     script = SCRIPT.format(tests=str(ROOT / "tests"))
     proc = subprocess.run([sys.executable, "-c", script, str(out)], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=1500)
@@ -88,3 +89,17 @@ def test_two_host_devices_give_the_lanes_of_one(two_devices, name, dtype):
     assert (one["status"] == cj.Status.FOUND).mean() > 0.95
     for key, value in one.items():
         np.testing.assert_array_equal(two_devices[f"{dtype}/{name}/{key}"], value, err_msg=f"{name} {key}")
+
+
+def test_use_cpu_devices_refuses_bad_counts_and_a_started_backend():
+    import jax
+
+    from caustics_jax.lanes import use_cpu_devices
+
+    have = len(jax.devices("cpu"))  # this process's backend is running
+    assert use_cpu_devices(have) == have  # the count it already has: accepted
+    with pytest.raises(ValueError, match="already started with"):
+        use_cpu_devices(have + 1)
+    for bad in (0, -2, "two", True, 1.5, None):
+        with pytest.raises(ValueError, match="positive integer or 'all'"):
+            use_cpu_devices(bad)
