@@ -3,9 +3,10 @@
 The two-device run happens in a subprocess (`lanes.use_cpu_devices(2)`, what
 `caustics-jax compare --cpu-devices` calls, must run before JAX starts); it writes its
 results to an .npz that this process compares, array for array, with the same solves on
-its single device. The subprocess uses blocks of 256 lanes per device (`CAUSTICS_JAX_BLOCK_LANES`), so its 600 lanes span two blocks of 512
-(each split in two device shares) while this process runs them in one block of the default
-size: per-lane results depend neither on the device count nor on the blocking.
+its single device. The subprocess uses blocks of 256 lanes per device
+(`CAUSTICS_JAX_BLOCK_LANES`), so its 600 lanes span two blocks of 512 (each split in two
+device shares) while this process runs them in one block of the default size: per-lane
+results depend neither on the device count nor on the blocking.
 """
 
 import os
