@@ -170,6 +170,37 @@ def _select(mask, new, old):
     return jax.tree.map(lambda a, b: jnp.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b), new, old)
 
 
+class _Packing:
+    """A pytree of per-lane arrays as one `(lanes, width)` matrix per dtype (bools as
+    int32), so that moving lanes in and out of a pool's slots is a few gathers and
+    scatters instead of one per leaf (the walk's lane state has about 50 leaves; each
+    gather or scatter is its own kernel to compile and run). Exact: only data moves."""
+
+    def __init__(self, tree):
+        leaves, self.treedef = jax.tree.flatten(tree)
+        self.kinds = [jnp.dtype(jnp.int32) if x.dtype == jnp.bool_ else x.dtype for x in leaves]
+        self.groups = list(dict.fromkeys(self.kinds))
+        self.layout, widths = [], dict.fromkeys(self.groups, 0)
+        for x, kind in zip(leaves, self.kinds, strict=True):
+            size = int(np.prod(x.shape[1:], dtype=np.int64))
+            self.layout.append((kind, widths[kind], size, x.shape[1:], x.dtype))
+            widths[kind] += size
+
+    def pack(self, tree) -> tuple:
+        leaves = jax.tree.leaves(tree)
+        n = leaves[0].shape[0]
+        parts: dict = {g: [] for g in self.groups}
+        for x, kind in zip(leaves, self.kinds, strict=True):
+            parts[kind].append(x.reshape(n, -1).astype(kind))
+        return tuple(jnp.concatenate(parts[g], axis=1) for g in self.groups)
+
+    def unpack(self, packed: tuple):
+        mats = dict(zip(self.groups, packed, strict=True))
+        leaves = [mats[kind][:, lo:lo + size].reshape((-1,) + shape).astype(dtype)
+                  for kind, lo, size, shape, dtype in self.layout]
+        return jax.tree.unflatten(self.treedef, leaves)
+
+
 def run_pool(step, states, running, slots: int):
     """Step every running lane until it ends, `slots` lanes at a time (inside jit).
 
@@ -186,20 +217,24 @@ def run_pool(step, states, running, slots: int):
     slots = min(slots, n)
     queue = jnp.nonzero(running, size=n, fill_value=n)[0].astype(jnp.int32)  # n: none left
     lane = queue[:slots]
+    packing = _Packing(states)
 
     def body(carry):
         states, lane, slot, head = carry
-        slot, done = jax.vmap(step)(slot)
+        stepped, done = jax.vmap(step)(packing.unpack(slot))
+        slot = packing.pack(stepped)
         finished = (lane < n) & done
-        states = jax.tree.map(lambda x, s: x.at[jnp.where(finished, lane, n)].set(s, mode="drop"), states, slot)
+        states = tuple(x.at[jnp.where(finished, lane, n)].set(s, mode="drop") for x, s in zip(states, slot,
+                                                                                              strict=True))
         pos = head + jnp.cumsum(finished, dtype=jnp.int32) - 1  # queue position of each refill
         refill = jnp.where(pos < n, queue[jnp.clip(pos, 0, n - 1)], n)
         lane = jnp.where(finished, refill, lane)
         slot = _select(finished, _rows(states, lane), slot)
         return states, lane, slot, head + jnp.sum(finished, dtype=jnp.int32)
 
-    carry = (states, lane, _rows(states, lane), jnp.int32(slots))
-    return jax.lax.while_loop(lambda c: jnp.any(c[1] < n), body, carry)[0]
+    packed = packing.pack(states)
+    carry = (packed, lane, _rows(packed, lane), jnp.int32(slots))
+    return packing.unpack(jax.lax.while_loop(lambda c: jnp.any(c[1] < n), body, carry)[0])
 
 
 def run_pools(steps: tuple, route, states, slots: int):
@@ -219,6 +254,8 @@ def run_pools(steps: tuple, route, states, slots: int):
     K = len(steps)
     slots = min(slots, n)
     first = jax.vmap(route)(states)
+    packing = _Packing(states)
+    states = packing.pack(states)
     bufs, tails, lanes_ = [], [], []
     for k in range(K):
         members = first == k
@@ -238,11 +275,12 @@ def run_pools(steps: tuple, route, states, slots: int):
         states, (bufs, heads, tails, lanes_, slot_states) = c[0], (list(x) for x in c[1:])
         for k in range(K):
             busy = lanes_[k] < n
-            stepped = jax.lax.cond(jnp.any(busy), jax.vmap(steps[k]), lambda s: s, slot_states[k])
-            to = jax.vmap(route)(stepped)
+            stepped = jax.lax.cond(jnp.any(busy), lambda s, k=k: packing.pack(jax.vmap(steps[k])(packing.unpack(s))),
+                                   lambda s: s, slot_states[k])
+            to = jax.vmap(route)(packing.unpack(stepped))
             leave = busy & (to != k)
             target = jnp.where(leave, lanes_[k], n)  # n: dropped
-            states = jax.tree.map(lambda x, s, t=target: x.at[t].set(s, mode="drop"), states, stepped)
+            states = tuple(x.at[target].set(s, mode="drop") for x, s in zip(states, stepped, strict=True))
             for j in range(K):
                 if j == k:
                     continue
@@ -261,7 +299,7 @@ def run_pools(steps: tuple, route, states, slots: int):
             slot_states[k] = _select(fill, _rows(states, lanes_[k]), slot_states[k])
         return states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_), tuple(slot_states)
 
-    return jax.lax.while_loop(cond, body, carry)[0]
+    return packing.unpack(jax.lax.while_loop(cond, body, carry)[0])
 
 
 def map_where(fn, need, out, *args, chunk: int):

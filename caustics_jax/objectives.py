@@ -8,6 +8,7 @@ All take the triangle (`V`, `N`: vertex positions and normals, rows), the receiv
 from __future__ import annotations
 
 import enum
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -80,26 +81,48 @@ def signed_sine_and_status(
     Under total internal reflection `r = 0` and the formula gives `f = 0`, which is *not*
     a solution: the status says so, and solvers must read it.
     """
+    if orientation not in ("tangent", "plane", "line"):
+        raise ValueError(f"orientation must be 'tangent', 'plane' or 'line', got {orientation!r}")
+    sine = _sine(V, N, P, L, ab, eta)
+    return sine.signed(orientation, V, N, P, L, ab), sine.status
+
+
+class _Sine(NamedTuple):
+    """What every orientation of the signed sine shares (`_sine`), computed once."""
+
+    M: jax.Array
+    n_s: jax.Array
+    w_L: jax.Array
+    r: jax.Array
+    c: jax.Array  # r x w_L
+    degenerate: jax.Array
+    status: jax.Array
+
+    def signed(self, orientation, V, N, P, L, ab):
+        """`f = s |r x w_L|` with the sign `s` of `orientation` (`signed_sine_and_status`)."""
+        c = self.c
+        if orientation == "tangent":
+            ref = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
+            s = jnp.where(dot(ref, c) >= 0, 1, -1).astype(c.dtype)
+        elif orientation == "plane":
+            s = jnp.where(dot(c, jnp.cross(L - P, self.n_s)) >= 0, 1, -1).astype(c.dtype)
+        else:  # "line"
+            s = jnp.where(dot(c, jnp.cross(L - P, self.M - P)) >= 0, 1, -1).astype(c.dtype)
+        return jnp.where(self.degenerate, 0, s * norm(c))
+
+
+def _sine(V, N, P, L, ab, eta) -> _Sine:
+    """The refracted direction `r`, `r x w_L` (seed 001 eq. 19-20) and the status at `ab`."""
     M, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
     r = refract(-w_P, -n_s, eta)
     c = jnp.cross(r, w_L)
-    if orientation == "tangent":
-        ref = tangent_to_world(V, conic_tangent(conic_coefficients(V, N, P, L), ab))
-        s = jnp.where(dot(ref, c) >= 0, 1, -1).astype(c.dtype)
-    elif orientation == "plane":
-        s = jnp.where(dot(c, jnp.cross(L - P, n_s)) >= 0, 1, -1).astype(c.dtype)
-    elif orientation == "line":
-        s = jnp.where(dot(c, jnp.cross(L - P, M - P)) >= 0, 1, -1).astype(c.dtype)
-    else:
-        raise ValueError(f"orientation must be 'tangent', 'plane' or 'line', got {orientation!r}")
-    f = s * norm(c)
     tir = dot(r, r) == 0
     status = jnp.where(
         degenerate,
         ObjectiveStatus.DEGENERATE,
         jnp.where(tir, ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, ObjectiveStatus.OK),
     ).astype(jnp.int32)
-    return jnp.where(degenerate, 0, f), status
+    return _Sine(M, n_s, w_L, r, c, degenerate, status)
 
 
 @float_inputs("V", "N", "P", "L", "ab", params=("eta",))
@@ -208,11 +231,10 @@ def bracket_objective(V, N, P, L, ab, eta):
     Batched with one `vmap` over the points: one call site per solver step keeps the
     compiled program small (XLA compile time grows with every inlined copy).
     """
-    def one(x):
-        f, st = signed_sine_and_status(V, N, P, L, x, eta, orientation="plane")
-        g, _ = signed_sine_and_status(V, N, P, L, x, eta, orientation="line")
-        _, _, _, w_L, _ = path_vectors(V, N, P, L, x)
-        backward = (st == ObjectiveStatus.OK) & (jnp.sum(refracted_direction(V, N, P, L, x, eta) * w_L) <= 0)
-        return f, jnp.where(backward, ObjectiveStatus.BACKWARD, st), g
+    def one(x):  # the path vectors and `r` once, both signs from them
+        sine = _sine(V, N, P, L, x, eta)
+        f, g = sine.signed("plane", V, N, P, L, x), sine.signed("line", V, N, P, L, x)
+        backward = (sine.status == ObjectiveStatus.OK) & (jnp.sum(sine.r * sine.w_L) <= 0)
+        return f, jnp.where(backward, ObjectiveStatus.BACKWARD, sine.status), g
 
     return jax.vmap(one)(ab)
