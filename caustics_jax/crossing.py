@@ -68,25 +68,45 @@ class Crossing(NamedTuple):
         return jnp.where(self.exact, self.s, self.s + self.s_tol)
 
 
+class FaceFrame(NamedTuple):
+    """What Möller-Trumbore needs of a triangle, independent of the line (`face_frames`):
+    a table of these is computed once per call and gathered per face test."""
+
+    V0: Float[Array, "*batch 3"]
+    e1: Float[Array, "*batch 3"]  # V1 - V0
+    e2: Float[Array, "*batch 3"]  # V2 - V0
+    len_e1: Float[Array, "*batch"]
+    len_e2: Float[Array, "*batch"]
+    V0_max: Float[Array, "*batch"]  # max |V0| component, for the rounding bound
+
+
+def face_frames(V: Float[Array, "*batch 3 3"]) -> FaceFrame:
+    """The `FaceFrame` of triangles `V`."""
+    V0 = V[..., 0, :]
+    e1, e2 = V[..., 1, :] - V0, V[..., 2, :] - V0
+    return FaceFrame(V0, e1, e2, jnp.sqrt(dot(e1, e1)), jnp.sqrt(dot(e2, e2)), jnp.max(jnp.abs(V0), -1))
+
+
 def triangle_crossing(P: Float[Array, "*batch 3"], d: Float[Array, "*batch 3"],
-                      V: Float[Array, "*batch 3 3"]) -> Crossing:  # fmt: skip
+                      V: Float[Array, "*batch 3 3"] | FaceFrame) -> Crossing:  # fmt: skip
     """Crossing of the line `P + s d` with triangle `V` (Möller-Trumbore; module docstring).
 
-    Returns a `Crossing`. Lines in the triangle's plane (`det` at the rounding level) do
-    not cross it.
+    `V`: the vertices, or their `face_frames` (a table computed once and gathered per
+    test saves the edge vectors and lengths in every test). Returns a `Crossing`. Lines
+    in the triangle's plane (`det` at the rounding level) do not cross it.
     """
+    frame = V if isinstance(V, FaceFrame) else face_frames(V)
     eps = jnp.finfo(P.dtype).eps
-    e1, e2 = V[..., 1, :] - V[..., 0, :], V[..., 2, :] - V[..., 0, :]
+    e1, e2, len_e1, len_e2 = frame.e1, frame.e2, frame.len_e1, frame.len_e2
     pvec = jnp.cross(d, e2)
     det = dot(e1, pvec)
-    len_d, len_e1, len_e2 = (jnp.sqrt(dot(v, v)) for v in (d, e1, e2))
+    len_d = jnp.sqrt(dot(d, d))
     ok = jnp.abs(det) > 16 * eps * len_d * len_e1 * len_e2
     inv = jnp.where(ok, 1 / jnp.where(ok, det, 1), 0)
-    tvec = P - V[..., 0, :]
+    tvec = P - frame.V0
     qvec = jnp.cross(tvec, e1)
     a, b, s = dot(tvec, pvec) * inv, dot(d, qvec) * inv, dot(e2, qvec) * inv
-    delta = C_ROUND * eps * (jnp.maximum(jnp.max(jnp.abs(P), -1), jnp.max(jnp.abs(V[..., 0, :]), -1))
-                             + jnp.max(jnp.abs(d), -1))  # fmt: skip
+    delta = C_ROUND * eps * (jnp.maximum(jnp.max(jnp.abs(P), -1), frame.V0_max) + jnp.max(jnp.abs(d), -1))
     abs_inv = jnp.abs(inv)
     tol_a = 16 * eps + delta * jnp.sqrt(dot(pvec, pvec)) * abs_inv
     tol_b = 16 * eps + delta * len_d * len_e1 * abs_inv

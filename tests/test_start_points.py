@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import caustics_jax as cj
 from caustics_jax import barycentric_point
 from caustics_jax.mesh import SurfaceMesh
 from caustics_jax.scenes import flat_pool, lagoon, wavy_pool
@@ -304,3 +305,22 @@ def test_a_lane_gets_the_same_start_point_alone_in_any_batch_and_on_every_path(d
     M = _point(mesh, batch)
     for other in (M_alone, _point(mesh, shuffled)[np.argsort(perm)], _point(mesh, general)):
         assert np.max(np.abs(other - M)[found], initial=0) <= bound
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_triangle_crossing_from_a_face_frame_table_equals_the_one_from_vertices(dtype):
+    """The cell traversal gathers `face_frames` computed once per call; the test must give
+    what the vertices give (same fields), hits and misses alike."""
+    from caustics_jax.crossing import face_frames, triangle_crossing
+
+    rng = np.random.default_rng(3)
+    V = rng.normal(size=(512, 3, 3)).astype(dtype)
+    P = rng.normal(size=(512, 3)).astype(dtype)
+    d = (V.mean(1) - P + 0.3 * rng.normal(size=(512, 3))).astype(dtype)  # about half hit
+    with cj.precision(dtype):
+        a = triangle_crossing(jnp.asarray(P), jnp.asarray(d), jnp.asarray(V))
+        table = face_frames(jnp.asarray(V))
+        b = triangle_crossing(jnp.asarray(P), jnp.asarray(d), table)
+    assert 0.2 < float(np.mean(np.asarray(a.inside))) < 0.8
+    for field in a._fields:
+        np.testing.assert_array_equal(np.asarray(getattr(a, field)), np.asarray(getattr(b, field)), err_msg=field)
