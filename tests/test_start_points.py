@@ -324,3 +324,42 @@ def test_triangle_crossing_from_a_face_frame_table_equals_the_one_from_vertices(
     assert 0.2 < float(np.mean(np.asarray(a.inside))) < 0.8
     for field in a._fields:
         np.testing.assert_array_equal(np.asarray(getattr(a, field)), np.asarray(getattr(b, field)), err_msg=field)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_long_cell_lists_continue_in_extra_rows_and_lose_no_face(dtype, monkeypatch):
+    """`bin_faces` rows hold all but the longest 0.1% of the cell lists (`row_width`); the
+    rest continue in chained rows. Each cell's chain lists the faces of the single-row
+    table, and vertical and oblique segments through the vertices of those cells (where
+    the valence is highest) find the BVH's crossings."""
+    import caustics_jax.face_cells as fc
+
+    mesh = lagoon(4000, seed=0, dtype=dtype).surface
+    cells = fc.bin_faces(mesh)
+    monkeypatch.setattr(fc, "LONG_CELLS", 0.0)
+    single = fc.bin_faces(mesh)
+    faces, more, owner = (np.asarray(x) for x in (cells.faces, cells.more, cells.owner))
+    n_cells = cells.shape[0] * cells.shape[1]
+    assert faces.shape[1] < single.faces.shape[1] and np.sum(more >= 0) >= 1  # the lagoon has long lists
+    assert np.array_equal(owner[:n_cells], np.arange(n_cells)) and np.all(owner[more[more >= 0]] == owner[more >= 0])
+    long_cells = []
+    for c in range(n_cells):
+        chain, row = [], c
+        while row >= 0:
+            chain += [f for f in faces[row] if f >= 0]
+            row = more[row]
+        expected = [f for f in np.asarray(single.faces)[c] if f >= 0]
+        assert chain == expected, c
+        if more[c] >= 0:
+            long_cells.append(c)
+    # Segments through every vertex of the faces listed in the long cells.
+    V = np.asarray(mesh.vertices)
+    verts = np.unique(np.asarray(mesh.faces)[[f for c in long_cells for f in np.asarray(single.faces)[c] if f >= 0]])
+    top = V[verts] + np.array([0.0, 0.0, 2.0])
+    P = np.concatenate([V[verts] - [0.0, 0.0, 1.0], V[verts] - [0.4, 0.3, 1.0]]).astype(dtype)
+    L = np.concatenate([top, top + [0.4, 0.3, 0.0]]).astype(dtype)
+    binned = start_points(mesh, P, L, accel=cells)
+    general = start_points(mesh, P, L, method="general")
+    np.testing.assert_array_equal(binned.found, general.found)
+    assert np.all(np.asarray(binned.found))
+    np.testing.assert_allclose(_point(mesh, binned), _point(mesh, general), atol=1e-5 if dtype == "float32" else 1e-12)
