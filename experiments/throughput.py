@@ -365,7 +365,8 @@ def plot(report, path):
         ax.set_xticks(np.arange(len(scenes_)) + 0.4 - width / 2, scenes_)
         ax.set_ylabel("throughput (1000 solves/s)")
         ax.set_title(f"{dtype}: solves per second, same process, interleaved")
-        ax.legend(fontsize=7)
+        ax.set_ylim(top=ax.get_ylim()[1] * 1.35)  # room for the legend above the bars
+        ax.legend(fontsize=7, ncol=3, loc="upper center")
         ax = axes[1, j]
         sel = [r for r in rows if r["dtype"] == dtype and r["scene"] == scenes_[0]]
         x = np.arange(len(sel))
