@@ -196,7 +196,7 @@ class _Packing:
 
     def unpack(self, packed: tuple):
         mats = dict(zip(self.groups, packed, strict=True))
-        leaves = [mats[kind][:, lo:lo + size].reshape((-1,) + shape).astype(dtype)
+        leaves = [mats[kind][:, lo:lo + size].reshape(mats[kind].shape[:1] + shape).astype(dtype)
                   for kind, lo, size, shape, dtype in self.layout]
         return jax.tree.unflatten(self.treedef, leaves)
 
@@ -344,7 +344,10 @@ def use_cpu_devices(count: int | str) -> int:
         jax.config.update("jax_num_cpu_devices", int(n))
     except RuntimeError:
         pass  # the backend already started: accepted below if it has the same count
-    have = len(jax.devices("cpu"))
+    try:
+        have = len(jax.devices("cpu"))
+    except RuntimeError:
+        raise ValueError("JAX has no CPU backend in this process (JAX_PLATFORMS excludes cpu)") from None
     if have != n:
         raise ValueError(f"JAX's CPU backend already started with {have} device(s); {n} CPU devices must be "
                          "requested before JAX runs anything (a fresh process)")

@@ -70,6 +70,33 @@ def test_run_pool_equals_a_per_lane_while_loop():
     np.testing.assert_array_equal(np.asarray(got[1]), np.asarray(need))
 
 
+def test_run_pool_moves_lanes_of_every_dtype_and_shape_exactly():
+    """The pool moves lanes as one matrix per dtype (bools with the integers): a state of
+    bools, int32, float32 matrices and an empty leaf comes back exactly as per-lane loops
+    leave it (the float updates are small integers: exact at any vector width)."""
+    rng = np.random.default_rng(1)
+    need = jnp.asarray(rng.integers(0, 9, 200), jnp.int32)
+    state = {"flag": jnp.asarray(rng.integers(0, 2, 200), bool), "k": jnp.zeros(200, jnp.int32),
+             "m": jnp.asarray(rng.integers(-5, 5, (200, 2, 3)), jnp.float32), "none": jnp.zeros((200, 0)),
+             "n": need}
+
+    def advance(c):
+        return {**c, "flag": ~c["flag"], "k": c["k"] + 1, "m": c["m"] * 2 - c["k"].astype(jnp.float32)}
+
+    def step(c):
+        c = advance(c)
+        return c, c["k"] >= c["n"]
+
+    def alone(c):
+        return jax.lax.while_loop(lambda c: c["k"] < c["n"], advance, c)
+
+    want = jax.vmap(alone)(state)
+    got = jax.jit(lambda s, r: run_pool(step, s, r, 16))(state, need > 0)
+    for key in state:
+        assert got[key].dtype == state[key].dtype and got[key].shape == state[key].shape, key
+        np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), err_msg=key)
+
+
 def test_map_where_computes_only_the_needed_lanes():
     """`fn` replaces exactly the needed lanes; its trips scale with their count (a chunk of
     16 over 1000 lanes of which 40 need it: 3 trips, traced once)."""
