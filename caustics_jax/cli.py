@@ -228,7 +228,7 @@ def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
     p.add_argument("--no-sweep", action="store_true", help="skip the tolerance sweep and figure")
     p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement")
     p.add_argument("--cpu-devices", default=None, metavar="N|all",
-                   help="split the CPU into N JAX devices ('all': one per core) so every core runs lanes "
+                   help="split the CPU into N JAX devices ('all': one per core, at most 8) so every core runs lanes "
                         "(default: JAX's one CPU device; `make demo` passes 'all')")
     p.add_argument("--eta", type=float, default=1.333)
     p.add_argument("--seed", type=int, default=0)

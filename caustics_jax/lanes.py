@@ -325,8 +325,14 @@ def map_where(fn, need, out, *args, chunk: int):
 # --------------------------------------------------------------------------- devices and blocks
 
 
+#: Most CPU devices `use_cpu_devices("all")` makes: a block holds `block_lanes()` lanes per
+#: device (262,144 at 8), and optimistix Newton compiles its program once per device.
+MAX_AUTO_CPU_DEVICES = 8
+
+
 def use_cpu_devices(count: int | str) -> int:
-    """Split the host CPU into `count` JAX devices (`"all"`: one per core, `os.cpu_count()`),
+    """Split the host CPU into `count` JAX devices (`"all"`: one per core, `os.cpu_count()`,
+    at most `MAX_AUTO_CPU_DEVICES`),
     so that `on_devices` runs a share of every block on each core. Call it before JAX runs
     anything (it sets `jax_num_cpu_devices`, which JAX reads when its CPU backend starts);
     `caustics-jax compare --cpu-devices` and `make demo` do. Why: XLA runs one CPU device's
@@ -337,7 +343,7 @@ def use_cpu_devices(count: int | str) -> int:
     (`tests/test_devices.py`). Returns the device count; a `ValueError` when `count` is not
     a positive integer or `"all"`, or when the CPU backend already started with another
     count (a fresh process is needed)."""
-    n = (os.cpu_count() or 1) if count == "all" else count
+    n = min(os.cpu_count() or 1, MAX_AUTO_CPU_DEVICES) if count == "all" else count
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
         raise ValueError(f"cpu devices must be a positive integer or 'all', got {count!r}")
     try:

@@ -14,6 +14,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -104,3 +105,6 @@ def test_use_cpu_devices_refuses_bad_counts_and_a_started_backend():
     for bad in (0, -2, "two", True, 1.5, None):
         with pytest.raises(ValueError, match="positive integer or 'all'"):
             use_cpu_devices(bad)
+    if have != 8:  # "all" on a 64-core machine asks for MAX_AUTO_CPU_DEVICES = 8
+        with mock.patch("os.cpu_count", return_value=64), pytest.raises(ValueError, match="8 CPU devices"):
+            use_cpu_devices("all")
