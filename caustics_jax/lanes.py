@@ -23,6 +23,7 @@ Host work here is numpy index bookkeeping, done once per call, outside jit (DESI
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -346,10 +347,9 @@ def use_cpu_devices(count: int | str) -> int:
     n = min(os.cpu_count() or 1, MAX_AUTO_CPU_DEVICES) if count == "all" else count
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
         raise ValueError(f"cpu devices must be a positive integer or 'all', got {count!r}")
-    try:
+    # The backend may have started already: then it is accepted below if the count matches.
+    with contextlib.suppress(RuntimeError):
         jax.config.update("jax_num_cpu_devices", int(n))
-    except RuntimeError:
-        pass  # the backend already started: accepted below if it has the same count
     try:
         have = len(jax.devices("cpu"))
     except RuntimeError:
