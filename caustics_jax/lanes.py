@@ -238,7 +238,7 @@ def run_pool(step, states, running, slots: int):
     return packing.unpack(jax.lax.while_loop(lambda c: jnp.any(c[1] < n), body, carry)[0])
 
 
-def run_pools(steps: tuple, route, states, slots: int):
+def run_pools(steps: tuple, route, states, slots: int, after=None):
     """`run_pool` with one pool per kind of step: a lane runs in the pool its state routes
     it to, so each step computes only its own branch (inside jit).
 
@@ -250,6 +250,12 @@ def run_pools(steps: tuple, route, states, slots: int):
     slot skips its step (`lax.cond`). A lane sees the same sequence of steps as in a
     per-lane loop that branches on its state, so the results are those of that loop; a
     branch that few lanes need costs only those lanes' slots.
+
+    `after(state) -> state`, if given, runs on every slot after each pool's step, on the
+    step's stored output (the branch's result): per lane the same as
+    `after(steps[k](state))`, but what `after` reads from the step is computed once rather
+    than copied by XLA's fusion into each output field's kernel. It must leave a state it
+    does not apply to unchanged (idle slots pass through it too).
     """
     n = jax.tree.leaves(states)[0].shape[0]
     K = len(steps)
@@ -278,6 +284,8 @@ def run_pools(steps: tuple, route, states, slots: int):
             busy = lanes_[k] < n
             stepped = jax.lax.cond(jnp.any(busy), lambda s, k=k: packing.pack(jax.vmap(steps[k])(packing.unpack(s))),
                                    lambda s: s, slot_states[k])
+            if after is not None:
+                stepped = packing.pack(jax.vmap(after)(packing.unpack(stepped)))
             to = jax.vmap(route)(packing.unpack(stepped))
             leave = busy & (to != k)
             target = jnp.where(leave, lanes_[k], n)  # n: dropped
@@ -308,19 +316,24 @@ def map_where(fn, need, out, *args, chunk: int):
 
     Computed on the compacted lanes that need it, `chunk` at a time, in a loop of
     `ceil(count / chunk)` trips: the cost is proportional to the lanes that need `fn`, not
-    to the batch (a rare branch under a plain `vmap` is paid by every lane).
+    to the batch (a rare branch under a plain `vmap` is paid by every lane). `out` moves
+    as one matrix per dtype (`_Packing`): one scatter per dtype, not one per leaf.
     """
     n = need.shape[0]
     idx = jnp.nonzero(need, size=n, fill_value=n)[0].astype(jnp.int32)
     idx = jnp.concatenate([idx, jnp.full(chunk, n, jnp.int32)])
     trips = (jnp.sum(need, dtype=jnp.int32) + chunk - 1) // chunk
 
-    def body(i, out):
-        sel = jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,))
-        res = jax.vmap(fn)(*_rows(args, sel))
-        return jax.tree.map(lambda o, r: o.at[sel].set(r.astype(o.dtype), mode="drop"), out, res)
+    packing = _Packing(out)
+    arg_packing = _Packing(args)
 
-    return jax.lax.fori_loop(0, trips, body, out)
+    def body(i, packed):
+        sel = jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,))
+        res = jax.vmap(fn)(*arg_packing.unpack(_rows(arg_packing.pack(args), sel)))
+        res = jax.tree.map(lambda o, r: r.astype(o.dtype), out, res)
+        return tuple(o.at[sel].set(r, mode="drop") for o, r in zip(packed, packing.pack(res), strict=True))
+
+    return packing.unpack(jax.lax.fori_loop(0, trips, body, packing.pack(out)))
 
 
 # --------------------------------------------------------------------------- devices and blocks

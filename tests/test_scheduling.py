@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from caustics_jax import Newton, Walk, compilation, scenes, solve
-from caustics_jax.lanes import map_where, run_blocks, run_pool
+from caustics_jax.lanes import map_where, run_blocks, run_pool, run_pools
 
 DTYPES = ["float32", "float64"]
 FIELDS = ("status", "point", "barycentric", "triangle", "iterations", "crossed", "residual", "start_point")
@@ -112,6 +112,57 @@ def test_map_where_computes_only_the_needed_lanes():
     out = jax.jit(lambda n, x: map_where(fn, n, jnp.full(1000, -1.0), x, chunk=16))(jnp.asarray(need), x)
     np.testing.assert_array_equal(np.asarray(out), np.where(need, 2 * np.arange(1000.0) + 1, -1.0))
     assert calls == [()]  # traced once, per lane (vmapped)
+
+
+def test_map_where_moves_a_pytree_of_every_dtype_exactly():
+    """`map_where` carries `out` as one matrix per dtype: bools, int32 and float matrices come
+    back exactly, replaced at the needed lanes only (dtype and shape kept)."""
+    rng = np.random.default_rng(2)
+    need = jnp.asarray(rng.integers(0, 2, 300), bool)
+    x = jnp.asarray(rng.integers(-50, 50, 300), jnp.int32)
+    out = {"b": jnp.zeros(300, bool), "i": jnp.full(300, -1, jnp.int32), "m": jnp.full((300, 2, 3), 0.5, jnp.float32)}
+
+    def fn(v):
+        return {"b": v > 0, "i": v * 3, "m": jnp.full((2, 3), v, jnp.float32) / 4}
+
+    got = jax.jit(lambda n, o, v: map_where(fn, n, o, v, chunk=32))(need, out, x)
+    want = jax.vmap(fn)(x)
+    for key in out:
+        assert got[key].dtype == out[key].dtype and got[key].shape == out[key].shape, key
+        mask = np.asarray(need).reshape((-1,) + (1,) * (out[key].ndim - 1))
+        np.testing.assert_array_equal(np.asarray(got[key]), np.where(mask, want[key], out[key]), err_msg=key)
+
+
+def test_run_pools_after_equals_a_per_lane_loop():
+    """Two pools with `after`: each lane sees `after(steps[k](state))` until it is done, as
+    in a per-lane loop that branches on its route (the walk's crossing and refinement pools
+    and its turn-back). Lanes hop between pools; `after` resets `x` once per lane."""
+    rng = np.random.default_rng(3)
+    n = 240
+    state = {"x": jnp.asarray(rng.integers(0, 7, n), jnp.int32), "k": jnp.zeros(n, jnp.int32),
+             "reset": jnp.zeros(n, bool), "f": jnp.asarray(rng.normal(size=(n, 2)), jnp.float32),
+             "n": jnp.asarray(rng.integers(0, 12, n), jnp.int32)}
+
+    def route(c):  # pool by the parity of x; -1 when done
+        return jnp.where(c["k"] < c["n"], c["x"] % 2, -1).astype(jnp.int32)
+
+    steps = (lambda c: {**c, "x": c["x"] + 1, "k": c["k"] + 1, "f": c["f"] * 2},
+             lambda c: {**c, "x": c["x"] + 3, "k": c["k"] + 1, "f": c["f"] - 1})
+
+    def after(c):  # once per lane, when x passes 9: back to 0 (a turn-back)
+        hit = (c["x"] > 9) & ~c["reset"]
+        return {**c, "x": jnp.where(hit, 0, c["x"]), "reset": c["reset"] | hit}
+
+    def alone(c):
+        def body(c):
+            return after(jax.lax.switch(route(c), steps, c))
+        return jax.lax.while_loop(lambda c: route(c) >= 0, body, c)
+
+    want = jax.vmap(alone)(state)
+    got = jax.jit(lambda s: run_pools(steps, route, s, 16, after=after))(state)
+    assert np.any(np.asarray(want["reset"])) and not np.all(np.asarray(want["reset"]))
+    for key in state:
+        np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), err_msg=key)
 
 
 def test_run_blocks_pads_the_last_block_and_cuts_it_back():

@@ -14,7 +14,7 @@ void cj_run(inout Lane r) {
     if (found) {
         s = cj_walk(r.P, r.L, face, ab0, true, r.eta, cj_scene.tol, int(cj_scene.max_steps),
                     cj_scene.bracket == 0u, int(cj_scene.ellipse_samples));
-    } else {  // what _first_triangle builds for a lane without a start point
+    } else {  // what walk._start_states builds for a lane without a start point
         s.status = CJ_NO_CROSSING;
         s.steps = 0;
         s.crossed = 0;

@@ -68,7 +68,7 @@ float cj_cos_at_P(Frame fr, vec3 P, vec3 L, vec2 ab) {
     return -dot(w_P, n_s);
 }
 
-// One direction of travel from M0 (walk._first_triangle's loop body).
+// One direction of travel from M0 (walk._first_triangle's `direction`).
 struct Direction {
     bool ok;
     int k;
@@ -94,7 +94,7 @@ Direction cj_direction(float coef[6], float rt[6], uint rv[6], vec2 rab[6], vec2
     return d;
 }
 
-// The initial state of one of the two walks from M0 (walk._first_triangle's build).
+// The initial state of one of the two walks from M0 (walk._start_states's `build`).
 WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direction dp, Direction dm,
                    float f0, uint st0, bool singular, float fp, float fm, uint stp, uint stm, uint st_np, uint st_nm,
                    float fsp, float fsm, bool br_p, bool br_m, bool use_m_bracket, bool is_ellipse, bool ellipse_bracket,
@@ -146,7 +146,7 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     return s;
 }
 
-// The two initial states from M0 (walk._first_triangle): `state` walks the chosen way,
+// The two initial states from M0 (walk._first_triangle, walk._start_states): `state` walks the chosen way,
 // `other` the other way; can_flip says whether that second way exists.
 void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta, float tol, int n_ellipse,
                        out bool can_flip, out WalkState state, out WalkState other) {

@@ -34,8 +34,13 @@ TIR-onset search), each refilled from a queue of lanes in its mode (`lanes.run_p
 so a step computes only the branch its lane needs. `"chunked"` is the
 previous scheduler (every lane computes the ellipse samples; fixed chunks of 256 lanes,
 each until its slowest lane), kept for comparison. Both apply the same per-lane functions
-(`walk_init`, `walk_advance`), so statuses, points and iteration counts are the same
-(`tests/test_scheduling.py`).
+(`_first_triangle` and `_start_states`, which `walk_init` composes; `walk_step` and
+`walk_turn_back`, which `walk_advance` composes), so statuses, points and iteration counts
+are the same (`tests/test_scheduling.py`). The pool runs each pair in two stages, with the
+first stage's output stored in between (`_Start`; `lanes.run_pools`' `after`): XLA's CPU
+fusion would otherwise recompute the first stage's decisions in the kernel of every state
+field that depends on them, and the generated code of those copies was most of the
+program's compile time (docs/solvers.md "Where the walk's compile time goes").
 """
 
 from __future__ import annotations
@@ -66,7 +71,8 @@ from ..objectives import ObjectiveStatus, bracket_objective, path_vectors, signe
 from ._solution import Solution, Status, confirm_found
 from .options import SolverOptions, check_choice, check_int, check_tol, default_tol
 
-__all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_ellipse", "walk_init", "walk_lane"]
+__all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_ellipse", "walk_init", "walk_lane", "walk_step",
+           "walk_turn_back"]
 
 WALK, BISECT, DONE = 0, 1, 2
 SCHEDULERS = ("pool", "chunked")
@@ -153,17 +159,37 @@ class _Ellipse(NamedTuple):
     st_near: jax.Array  # (2,)
 
 
-def _first_triangle(mesh, P, L, face, ab0, found, eta, tol):
-    """Initial state from `M0`: bracket, walk direction, or a terminal status; an ellipse
-    inside the triangle is left to `_ellipse_bracket`.
+class _Start(NamedTuple):
+    """What `_first_triangle` found from `M0`, per lane; `_start_states` builds the walks.
 
-    Returns `(can_turn, state, other, is_ellipse, ellipse)`: `other` walks the other way
-    from the one chosen here; `can_turn` says whether that second way exists (a walk that
-    started without a bracket, with an exit in both directions). Both share every
-    evaluation of `f`. `is_ellipse`: the curve has no edge crossing (§3.4.4); there the
-    state reads `UNRESOLVED_ELLIPSE` (unless `M0` is a solution, degenerate, or has no
-    start point) until `_ellipse_bracket` has sampled the curve (`ellipse`: its inputs).
-    """
+    `flags` holds its booleans (`_FLAGS`) as the bits of one int32: the scheduler stores
+    this record before building the states, and a stored value is computed once. XLA's
+    CPU fusion copies a cheap producer into every kernel that reads it, so each of the
+    two walks' ~25 state fields had recomputed the same chain of ~150 objective-status
+    and sign tests. Pairs `(2, ...)` are the `+t0` and `-t0` directions."""
+
+    flags: jax.Array
+    face: jax.Array
+    ab0: jax.Array
+    f0: jax.Array
+    k: jax.Array  # exit edges
+    t: jax.Array  # exit edge parameters
+    ab: jax.Array  # exits
+    f: jax.Array  # f at the exits
+    phi: jax.Array  # pencil angles of the exits
+    phi_near: jax.Array  # pencil angles of the near points
+    f_near: jax.Array
+    near: jax.Array
+    tau: jax.Array
+    perp: jax.Array
+    ellipse: _Ellipse
+
+
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
+    """What the first triangle decides from `M0` (`_Start`): the exits in both directions,
+    `f` there, the bracket or the walk direction, terminal conditions; `_start_states`
+    builds the two walks from it, and an ellipse inside the triangle is left to
+    `_ellipse_bracket`."""
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
     t0 = conic_tangent(coef, ab0)
@@ -174,9 +200,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol):
     # orientation does not, but each direction still starts its bracket a little off M0
     # so that the two brackets share no end point.
     delta0 = 1e4 * float(np.finfo(dtype).eps)
-    dirs = []
-    for s in (1.0, -1.0):
-        tau, perp = orientation(coef, ab0, s * t0)
+
+    def direction(sign):
+        tau, perp = orientation(coef, ab0, sign * t0)
         ok, k, t, ab, phi = next_crossing(roots, ab0, tau, perp)
         room = jnp.linalg.norm(ab - ab0)
         delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
@@ -184,9 +210,12 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol):
         v = near - ab0
         phi_s = jnp.arctan2(v @ perp, v @ tau)
         phi_s = jnp.clip(phi_s, 0, jnp.where(ok, phi / 2, jnp.pi / 2))
-        dirs.append((ok, k, t, ab, phi, tau, perp, phi_s, near, room))
-    (okp, kp, tp, abp, phip, taup, perpp, phisp, nearp, roomp) = dirs[0]
-    (okm, km, tm, abm, phim, taum, perpm, phism, nearm, roomm) = dirs[1]
+        return ok, k, t, ab, phi, tau, perp, phi_s, near, room
+
+    # Both directions in one vmap (+t0, -t0): one compiled copy of the crossing search.
+    dirs = jax.vmap(direction)(jnp.asarray([1.0, -1.0], dtype))
+    (okp, kp, tp, abp, phip, taup, perpp, phisp, nearp, roomp) = (x[0] for x in dirs)
+    (okm, km, tm, abm, phim, taum, perpm, phism, nearm, roomm) = (x[1] for x in dirs)
 
     # The frame of the pencil at M0, for an ellipse inside the triangle (`_ellipse_bracket`).
     tau_e, perp_e = orientation(coef, ab0, t0)
@@ -212,74 +241,113 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol):
     cos_p, cos_m = _cos_at_P(V, N, P, L, jnp.stack([abp, abm]))
     prefer_m = jnp.where(tirp != tirm, tirp, jnp.where(tirp, cos_m > cos_p, jnp.abs(fm) < jnp.abs(fp)))
 
-    is_ellipse = ~okp & ~okm
+    walk_m = okm & (~okp | prefer_m)
+    TIR, DEG = ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, ObjectiveStatus.DEGENERATE
+    at_m0 = (jnp.abs(f0) <= tol) & (st0 == OK)  # M0 itself is a solution
+    flags = dict(
+        found=found, is_ellipse=~okp & ~okm, br_p=br_p, br_m=br_m, use_m_bracket=use_m_bracket, walk_m=walk_m,
+        # The arc of each direction runs into TIR from a transmitting near point.
+        tir_arc_p=okp & (st_all[3] == OK) & (stp == TIR), tir_arc_m=okm & (st_all[4] == OK) & (stm == TIR),
+        degenerate_exit_p=stp == DEG, degenerate_exit_m=stm == DEG, at_m0=at_m0,
+        # A singular conic at a solution M0 does not matter (P, L and the normal aligned
+        # on a flat surface make every point of the plane "coplanar"): M0 stays FOUND.
+        degenerate=(singular & ~at_m0) | (st0 == DEG), okp=okp, okm=okm)
+    ellipse = _Ellipse(coef, tau_e, perp_e, jnp.stack([nearp, nearm]), phisp, jnp.stack([fsp, fsm]),
+                       jnp.stack([gsp, gsm]), st_all[3:5])
+    _, k, t, ab, phi, tau, perp, phi_s, near, _ = dirs
+    return _Start(_pack_flags(flags), face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]), phi, phi_s,
+                  jnp.stack([fsp, fsm]), near, tau, perp, ellipse)
+
+
+#: The booleans of `_Start.flags`, bit i = name i.
+_FLAGS = ("found", "is_ellipse", "br_p", "br_m", "use_m_bracket", "walk_m", "tir_arc_p", "tir_arc_m",
+          "degenerate_exit_p", "degenerate_exit_m", "at_m0", "degenerate", "okp", "okm")
+
+
+def _pack_flags(flags: dict) -> jax.Array:
+    """`_FLAGS` as the bits of one int32 (`_Start`)."""
+    return sum(flags[name].astype(jnp.int32) << i for i, name in enumerate(_FLAGS))
+
+
+def _unpack_flags(bits) -> dict:
+    return {name: (bits >> i) & 1 == 1 for i, name in enumerate(_FLAGS)}
+
+
+def _start_states(start: _Start):
+    """The initial state of both walks from `M0` (`_first_triangle`'s decisions), or a
+    terminal status.
+
+    Returns `(can_turn, state, other, is_ellipse, ellipse)`: `other` walks the other way
+    from the one chosen; `can_turn` says whether that second way exists (a walk that
+    started without a bracket, with an exit in both directions). Both share every
+    evaluation of `f`. `is_ellipse`: the curve has no edge crossing (§3.4.4); there the
+    state reads `UNRESOLVED_ELLIPSE` (unless `M0` is a solution, degenerate, or has no
+    start point) until `_ellipse_bracket` has sampled the curve (`ellipse`: its inputs).
+    """
+    fl = _unpack_flags(start.flags)
+    is_ellipse, br_p, br_m, found = fl["is_ellipse"], fl["br_p"], fl["br_m"], fl["found"]
+    dtype = start.f0.dtype
+    e = start.ellipse
     # Placeholders where the curve is an ellipse: `_ellipse_bracket` fills the bracket in.
     phis_all, fs_all, pts = jnp.zeros(2, dtype), jnp.zeros(2, dtype), jnp.zeros((2, 2), dtype)
     j, ellipse_bracket = 0, jnp.asarray(False)
+    pm = lambda x, m: jnp.where(m, x[1], x[0])  # noqa: E731  (the -t0 or the +t0 direction)
 
     def build(walk_m):
         bracket = jnp.where(is_ellipse, ellipse_bracket, br_p | br_m)
-        use_m = use_m_bracket | (~(br_p | br_m) & walk_m)
+        use_m = fl["use_m_bracket"] | (~(br_p | br_m) & walk_m)
         # No sign change, and the arc of the walk direction runs into TIR: search it
         # towards the onset first (`_bisect_update`; P within 1e-6 m of the surface puts
         # the root 1e-9 m from M0 and the rest of the triangle in TIR). Without a root
         # there the walk goes on as before (tir_end = 2).
-        tir_arc = jnp.where(walk_m, okm & (st_all[4] == OK) & (stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION),
-                            okp & (st_all[3] == OK) & (stp == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION))
+        tir_arc = jnp.where(walk_m, fl["tir_arc_m"], fl["tir_arc_p"])
         search = ~is_ellipse & ~(br_p | br_m) & tir_arc
-        tau = jnp.where(is_ellipse, tau_e, jnp.where(use_m, taum, taup))
-        perp = jnp.where(is_ellipse, perp_e, jnp.where(use_m, perpm, perpp))
-        phi_lo = jnp.where(is_ellipse, phis_all[j], jnp.where(use_m, phism, phisp))
-        phi_hi = jnp.where(is_ellipse, phis_all[j + 1], jnp.where(use_m, phim, phip))
-        f_lo = jnp.where(is_ellipse, fs_all[j], jnp.where(use_m, fsm, fsp))
-        f_hi = jnp.where(is_ellipse, fs_all[j + 1], jnp.where(use_m, fm, fp))
-        ab_lo = jnp.where(is_ellipse, pts[j], jnp.where(use_m, nearm, nearp))
-        ab_hi = jnp.where(is_ellipse, pts[j + 1], jnp.where(use_m, abm, abp))
+        tau = jnp.where(is_ellipse, e.tau, pm(start.tau, use_m))
+        perp = jnp.where(is_ellipse, e.perp, pm(start.perp, use_m))
+        phi_lo = jnp.where(is_ellipse, phis_all[j], pm(start.phi_near, use_m))
+        phi_hi = jnp.where(is_ellipse, phis_all[j + 1], pm(start.phi, use_m))
+        f_lo = jnp.where(is_ellipse, fs_all[j], pm(start.f_near, use_m))
+        f_hi = jnp.where(is_ellipse, fs_all[j + 1], pm(start.f, use_m))
+        ab_lo = jnp.where(is_ellipse, pts[j], pm(start.near, use_m))
+        ab_hi = jnp.where(is_ellipse, pts[j + 1], pm(start.ab, use_m))
 
         pick_m = walk_m
-        exit_k = jnp.where(pick_m, km, kp)
-        exit_t = jnp.where(pick_m, tm, tp)
-        exit_ab = jnp.where(pick_m, abm, abp)
-        f_exit = jnp.where(pick_m, fm, fp)
-        st_exit = jnp.where(pick_m, stm, stp)
+        degenerate_exit = jnp.where(pick_m, fl["degenerate_exit_m"], fl["degenerate_exit_p"])
 
         status = jnp.asarray(Status.FOUND, jnp.int32)
         mode = jnp.where(bracket | search, BISECT, WALK)
         # A walk may start inside total internal reflection (M0 beyond the critical angle):
         # it walks on until f is defined again, so only a degenerate exit stops it here.
-        mode = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), DONE, mode)
-        status = jnp.where(~bracket & (st_exit == ObjectiveStatus.DEGENERATE), Status.DEGENERATE, status)
+        mode = jnp.where(~bracket & degenerate_exit, DONE, mode)
+        status = jnp.where(~bracket & degenerate_exit, Status.DEGENERATE, status)
         mode = jnp.where(is_ellipse & ~ellipse_bracket, DONE, mode)
         status = jnp.where(is_ellipse & ~ellipse_bracket, Status.UNRESOLVED_ELLIPSE, status)
-        at_m0 = (jnp.abs(f0) <= tol) & (st0 == OK)  # M0 itself is a solution
-        mode = jnp.where(at_m0, DONE, mode)
-        status = jnp.where(at_m0, Status.FOUND, status)
+        mode = jnp.where(fl["at_m0"], DONE, mode)
+        status = jnp.where(fl["at_m0"], Status.FOUND, status)
         # Terminal conditions that override everything else, most specific last.
-        # A singular conic at a solution M0 does not matter (P, L and the normal aligned
-        # on a flat surface make every point of the plane "coplanar"): M0 stays FOUND.
-        degenerate = (singular & ~at_m0) | (st0 == ObjectiveStatus.DEGENERATE)
-        mode = jnp.where(degenerate, DONE, mode)
-        status = jnp.where(degenerate, Status.DEGENERATE, status)
+        mode = jnp.where(fl["degenerate"], DONE, mode)
+        status = jnp.where(fl["degenerate"], Status.DEGENERATE, status)
         mode = jnp.where(found, mode, DONE)
         status = jnp.where(found, status, Status.NO_CROSSING)
 
         searching = search & (mode == BISECT)
-        can_flip = ((mode == WALK) | searching) & okp & okm
+        can_flip = ((mode == WALK) | searching) & fl["okp"] & fl["okm"]
         return can_flip, _State(
-            mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face.astype(jnp.int32),
-            exit_k=exit_k, exit_t=exit_t, exit_ab=exit_ab, f_exit=f_exit,
-            anchor=ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
+            mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=start.face,
+            exit_k=pm(start.k, pick_m), exit_t=pm(start.t, pick_m), exit_ab=pm(start.ab, pick_m),
+            f_exit=pm(start.f, pick_m),
+            anchor=start.ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
             ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32),
             tir_end=jnp.where(searching, 2, 0).astype(jnp.int32),
-            best_ab=ab0,
-            best_f=f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
+            best_ab=start.ab0,
+            best_f=start.f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
         )
 
-    walk_m = okm & (~okp | prefer_m)
-    (can_flip, state), other = build(walk_m), build(~walk_m)[1]
-    ellipse = _Ellipse(coef, tau_e, perp_e, jnp.stack([nearp, nearm]), phisp, jnp.stack([fsp, fsm]),
-                       jnp.stack([gsp, gsm]), st_all[3:5])
-    return can_flip, state, other, is_ellipse, ellipse
+    # The chosen way and the other way in one vmap: one compiled copy of `build`.
+    walk_m = fl["walk_m"]
+    flips, states = jax.vmap(build)(jnp.stack([walk_m, ~walk_m]))
+    can_flip, state, other = flips[0], jax.tree.map(lambda x: x[0], states), jax.tree.map(lambda x: x[1], states)
+    return can_flip, state, other, is_ellipse, e
 
 
 def _ellipse_bracket(mesh, P, L, eta, n_ellipse, s: _State, e: _Ellipse) -> _State:
@@ -508,7 +576,7 @@ def walk_init(mesh: SurfaceMesh, P, L, face, ab0, found, eta, tol, options: Walk
     """A lane's `LaneState` before its first step (the first triangle, §3.4.2-3.4.3),
     whether its curve is an ellipse inside that triangle (then `walk_ellipse` completes
     the state), and what the ellipse search needs."""
-    can_flip, state, other, is_ellipse, ellipse = _first_triangle(mesh, P, L, face, ab0, found, eta, tol)
+    can_flip, state, other, is_ellipse, ellipse = _start_states(_first_triangle(mesh, P, L, face, ab0, found, eta, tol))
     return LaneState(P, L, state, jnp.asarray(False), can_flip, other), is_ellipse, ellipse
 
 
@@ -519,12 +587,11 @@ def walk_ellipse(mesh: SurfaceMesh, eta, options: Walk, lane: LaneState, ellipse
                                                 ellipse))
 
 
-def walk_advance(mesh: SurfaceMesh, eta, tol, options: Walk, lane: LaneState, mode: int | None = None) -> LaneState:
-    """One iteration of a lane (`_step`: a crossing or a refinement cut), with the turn-back:
-    a walk that fails (TIR, boundary, lost curve, stalled bracket) restarts once from `M0`
-    the other way, keeping its step count. A lane already done is returned unchanged.
-    `mode` (WALK or BISECT) computes only that branch, for a lane known to be in it (the
-    pool scheduler); None computes both and selects (one vmapped program for all lanes)."""
+def walk_step(mesh: SurfaceMesh, eta, tol, options: Walk, lane: LaneState, mode: int | None = None) -> LaneState:
+    """One iteration of a lane (`_step`: a crossing or a refinement cut), before the
+    turn-back (`walk_turn_back`). A lane already done is returned unchanged. `mode` (WALK
+    or BISECT) computes only that branch, for a lane known to be in it (the pool
+    scheduler); None computes both and selects (one vmapped program for all lanes)."""
     s = lane.state
     illinois = options.bracket == "illinois"
     if mode == WALK:
@@ -533,11 +600,23 @@ def walk_advance(mesh: SurfaceMesh, eta, tol, options: Walk, lane: LaneState, mo
         nxt = _bisect_branch(mesh, lane.P, lane.L, eta, tol, illinois, s)
     else:
         nxt = _step(mesh, lane.P, lane.L, eta, tol, illinois, s)
-    nxt = jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s)
-    failed = (nxt.mode == DONE) & (nxt.status != Status.FOUND) & lane.can_flip & ~lane.turned
-    restart = lane.other._replace(steps=nxt.steps, crossed=nxt.crossed)
-    nxt = jax.tree.map(lambda r, n: jnp.where(failed, r, n), restart, nxt)
-    return lane._replace(state=nxt, turned=lane.turned | failed)
+    return lane._replace(state=jax.tree.map(lambda n, o: jnp.where(s.mode == DONE, o, n), nxt, s))
+
+
+def walk_turn_back(lane: LaneState) -> LaneState:
+    """The turn-back (`walk_lane`): a walk that failed (done, not FOUND) restarts once from
+    `M0` the other way, keeping its step count. Idempotent: a lane that cannot turn, or
+    already turned, or is not done, is returned unchanged."""
+    s = lane.state
+    failed = (s.mode == DONE) & (s.status != Status.FOUND) & lane.can_flip & ~lane.turned
+    restart = lane.other._replace(steps=s.steps, crossed=s.crossed)
+    return lane._replace(state=jax.tree.map(lambda r, n: jnp.where(failed, r, n), restart, s),
+                         turned=lane.turned | failed)
+
+
+def walk_advance(mesh: SurfaceMesh, eta, tol, options: Walk, lane: LaneState, mode: int | None = None) -> LaneState:
+    """`walk_step` then `walk_turn_back`: one iteration of a lane, with the turn-back."""
+    return walk_turn_back(walk_step(mesh, eta, tol, options, lane, mode))
 
 
 def _running(s: _State, max_steps):
@@ -576,16 +655,16 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     point, the ellipse samples of the lanes that need them, then the slot pool."""
     slots = pool_slots()
 
-    def init(p, l, f, a, ok):
-        return walk_init(mesh, p, l, f, a, ok, eta, tol, options)
+    def first(p, l, f, a, ok):
+        return _first_triangle(mesh, p, l, f, a, ok, eta, tol)
 
-    # Lanes without a start point keep this: NO_CROSSING, no steps (as `_first_triangle` ends them).
-    shapes = jax.eval_shape(jax.vmap(init), P, L, face, ab0, found)
-    lanes, is_ellipse, ellipse = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
-    lanes = lanes._replace(state=lanes.state._replace(mode=jnp.full_like(lanes.state.mode, DONE),
-                                                      status=jnp.full_like(lanes.state.status, Status.NO_CROSSING)))
-    lanes, is_ellipse, ellipse = map_where(init, found, (lanes, is_ellipse, ellipse), P, L, face, ab0, found,
-                                           chunk=slots)
+    # The first triangles' records (`_Start`), stored, then both walks built from them for
+    # every lane. Lanes without a start point keep a zero record, which builds NO_CROSSING
+    # with no steps (as `_first_triangle` ends them); they never step.
+    empty = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(jax.vmap(first), P, L, face, ab0, found))
+    starts = map_where(first, found, empty, P, L, face, ab0, found, chunk=slots)
+    can_flip, state, other, is_ellipse, ellipse = jax.vmap(_start_states)(starts)
+    lanes = LaneState(P, L, state, jnp.zeros_like(can_flip), can_flip, other)
     lanes = map_where(lambda lane, e: walk_ellipse(mesh, eta, options, lane, e), is_ellipse, lanes, lanes, ellipse,
                       chunk=slots)
 
@@ -594,8 +673,9 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     def route(lane):
         return jnp.where(_running(lane.state, max_steps), lane.state.mode, -1).astype(jnp.int32)
 
-    steps = tuple(lambda lane, m=m: walk_advance(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT))
-    lanes = run_pools(steps, route, lanes, slots)
+    # The turn-back runs after the step's branch (`run_pools`' `after`), on its stored output.
+    steps = tuple(lambda lane, m=m: walk_step(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT))
+    lanes = run_pools(steps, route, lanes, slots, after=walk_turn_back)
     return _capped(lanes.state)
 
 
