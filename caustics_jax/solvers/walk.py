@@ -214,8 +214,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
 
     # Both directions in one vmap (+t0, -t0): one compiled copy of the crossing search.
     dirs = jax.vmap(direction)(jnp.asarray([1.0, -1.0], dtype))
-    (okp, kp, tp, abp, phip, taup, perpp, phisp, nearp, roomp) = (x[0] for x in dirs)
-    (okm, km, tm, abm, phim, taum, perpm, phism, nearm, roomm) = (x[1] for x in dirs)
+    ok_pm, _, _, ab_pm, phi_pm, _, _, phis_pm, near_pm, room_pm = dirs
+    (okp, okm), (abp, abm), (phip, phim) = ok_pm, ab_pm, phi_pm
+    (nearp, nearm), (roomp, roomm), phisp = near_pm, room_pm, phis_pm[0]
 
     # The frame of the pencil at M0, for an ellipse inside the triangle (`_ellipse_bracket`).
     tau_e, perp_e = orientation(coef, ab0, t0)
