@@ -53,8 +53,8 @@ def format_table(report: dict) -> str:
                      f"{ref['lanes']} lanes (solutions per lane: {ref['solutions_per_lane']}); "
                      "@M0: returned the solution nearest M0")
     lines.append("angle error (rad): refraction-angle error of every found lane, float64 check; "
-                 "compile: first call minus a steady call (c: loaded from the persistent compilation "
-                 "cache, CAUSTICS_JAX_COMPILATION_CACHE=0 to measure it)")
+                 "compile: first call minus a steady call (c: its programs loaded from the persistent "
+                 "compilation cache, none compiled; CAUSTICS_JAX_COMPILATION_CACHE=0 to measure it)")
     for q in cmp.ratios(report):
         lines.append(f"[{q['dtype']}] walk / best Newton ({q['best_newton']}) throughput ratio: "
                      f"{q['speed_ratio']:.2f}")

@@ -75,3 +75,24 @@ def test_version_flag_prints_the_package_version(capsys):
         cli.main(["--version"])
     assert exc.value.code == 0
     assert capsys.readouterr().out.strip() == f"caustics-jax {__version__}"
+
+
+@pytest.mark.parametrize("events, cached", [((), False), (("cache_hits",), True),
+                                            (("cache_hits", "cache_misses"), False), (("cache_misses",), False)])
+def test_compile_time_is_marked_cached_only_when_nothing_was_compiled(events, cached):
+    """`compare._timed` marks a first call "c" (a load time) only when it loaded programs
+    from the persistent cache and wrote none: a solver recompiled after a code change,
+    next to small programs loaded from the cache, keeps its real compile time."""
+    import jax
+
+    calls = []
+
+    def fn():
+        if not calls:  # the first call: JAX's events for its programs
+            for e in events:
+                jax.monitoring.record_event(f"/jax/compilation_cache/{e}")
+        calls.append(1)
+        return np.zeros(1)
+
+    _, compile_s, steady, got = compare._timed(fn, repeats=2)
+    assert got is cached and len(calls) == 3 and compile_s >= 0 and steady >= 0
