@@ -316,8 +316,9 @@ def map_where(fn, need, out, *args, chunk: int):
 
     Computed on the compacted lanes that need it, `chunk` at a time, in a loop of
     `ceil(count / chunk)` trips: the cost is proportional to the lanes that need `fn`, not
-    to the batch (a rare branch under a plain `vmap` is paid by every lane). `out` moves
-    as one matrix per dtype (`_Packing`): one scatter per dtype, not one per leaf.
+    to the batch (a rare branch under a plain `vmap` is paid by every lane). `out` and
+    `args` move as one matrix per dtype (`_Packing`): one scatter and one gather per
+    dtype per trip, not one per leaf.
     """
     n = need.shape[0]
     idx = jnp.nonzero(need, size=n, fill_value=n)[0].astype(jnp.int32)
@@ -326,10 +327,11 @@ def map_where(fn, need, out, *args, chunk: int):
 
     packing = _Packing(out)
     arg_packing = _Packing(args)
+    packed_args = arg_packing.pack(args)  # once, outside the loop
 
     def body(i, packed):
         sel = jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,))
-        res = jax.vmap(fn)(*arg_packing.unpack(_rows(arg_packing.pack(args), sel)))
+        res = jax.vmap(fn)(*arg_packing.unpack(_rows(packed_args, sel)))
         res = jax.tree.map(lambda o, r: r.astype(o.dtype), out, res)
         return tuple(o.at[sel].set(r, mode="drop") for o, r in zip(packed, packing.pack(res), strict=True))
 
