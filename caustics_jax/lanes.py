@@ -318,20 +318,29 @@ def map_where(fn, need, out, *args, chunk: int):
     `ceil(count / chunk)` trips: the cost is proportional to the lanes that need `fn`, not
     to the batch (a rare branch under a plain `vmap` is paid by every lane). `out` and
     `args` move as one matrix per dtype (`_Packing`): one scatter and one gather per
-    dtype per trip, not one per leaf.
+    dtype per trip, not one per leaf. `out=None`: zeros of `fn`'s output where `need` is
+    False. `fn` is traced once either way (the loop body reuses the trace that gave the
+    output's shape: a second trace of a large `fn` costs seconds of a first call).
     """
     n = need.shape[0]
     idx = jnp.nonzero(need, size=n, fill_value=n)[0].astype(jnp.int32)
     idx = jnp.concatenate([idx, jnp.full(chunk, n, jnp.int32)])
     trips = (jnp.sum(need, dtype=jnp.int32) + chunk - 1) // chunk
 
-    packing = _Packing(out)
     arg_packing = _Packing(args)
     packed_args = arg_packing.pack(args)  # once, outside the loop
+    batched = jax.jit(jax.vmap(fn))  # a nested jit caches its trace by argument shapes
+
+    def apply(sel):
+        return batched(*arg_packing.unpack(_rows(packed_args, sel)))
+
+    if out is None:
+        shapes = jax.eval_shape(apply, idx[:chunk])
+        out = jax.tree.map(lambda x: jnp.zeros((n, *x.shape[1:]), x.dtype), shapes)
+    packing = _Packing(out)
 
     def body(i, packed):
-        sel = jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,))
-        res = jax.vmap(fn)(*arg_packing.unpack(_rows(packed_args, sel)))
+        res = apply(sel := jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,)))
         res = jax.tree.map(lambda o, r: r.astype(o.dtype), out, res)
         return tuple(o.at[sel].set(r, mode="drop") for o, r in zip(packed, packing.pack(res), strict=True))
 

@@ -662,8 +662,7 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     # The first triangles' records (`_Start`), stored, then both walks built from them for
     # every lane. Lanes without a start point keep a zero record, which builds NO_CROSSING
     # with no steps (as `_first_triangle` ends them); they never step.
-    empty = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(jax.vmap(first), P, L, face, ab0, found))
-    starts = map_where(first, found, empty, P, L, face, ab0, found, chunk=slots)
+    starts = map_where(first, found, None, P, L, face, ab0, found, chunk=slots)
     can_flip, state, other, is_ellipse, ellipse = jax.vmap(_start_states)(starts)
     lanes = LaneState(P, L, state, jnp.zeros_like(can_flip), can_flip, other)
     lanes = map_where(lambda lane, e: walk_ellipse(mesh, eta, options, lane, e), is_ellipse, lanes, lanes, ellipse,
