@@ -47,7 +47,10 @@ N_ARCS = 7
 
 def orientation(coef, e, tau):
     """Unit travel direction and the `sigma`-signed normal `perp` at curve point `e`, so
-    that the curve ahead (direction `tau`) has pencil angles `phi` in `(0, pi)`."""
+    that the curve ahead (direction `tau`) has pencil angles `phi` in `(0, pi)`.
+
+    The pencil frame of the module docstring (this project's parametrisation of the walk
+    of seed 001 §3.4.3), bent towards the tangent of seed 001 eq. 13-15 (MATH.md §2)."""
     tau = tau / jnp.maximum(jnp.linalg.norm(tau), jnp.finfo(tau.dtype).tiny)
     A, B, C = coef[0], coef[1], coef[2]
     t = conic_tangent(coef, e)
@@ -62,13 +65,15 @@ def orientation(coef, e, tau):
 
 def edge_roots(coef):
     """`(t, valid, ab)`: the conic's edge roots (`conic.edge_intersections`, `(3, 2)` each)
-    and their barycentrics `(3, 2, 2)`."""
+    and their barycentrics `(3, 2, 2)` (seed 001 eq. 22-24, corrected in MATH.md §3)."""
     t, valid = edge_intersections(coef)
     return t, valid, edge_intersection_points(t)
 
 
 def next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
     """The first edge root met when travelling along the conic from `e` in direction `tau`.
+
+    Seed 001 §3.4.3's exit edge, including the re-entry case of Fig. 5c (module docstring).
 
     Returns `(ok, edge, t, ab, phi)`. Never a candidate: on the entry edge, the root
     nearest the entry parameter when it is within `8 sqrt(eps)` of it (the entry point
@@ -113,13 +118,17 @@ def on_tangent_line(across, dist, scale):
     """A root at distance `dist` from the curve point `e`, `across` from the tangent line at
     `e` (`(root - e) . perp`), lies on that tangent line to rounding (`next_crossing`):
     `|across| <= 1e3 eps dist`, or `<= 64 eps scale` with `scale` the magnitude of the
-    barycentrics of both points (their absolute rounding)."""
+    barycentrics of both points (their absolute rounding). A rounding bound of this
+    project (MATH.md §1: tolerances scaled to eps), no paper formula."""
     eps = float(np.finfo(across.dtype).eps)
     return (jnp.abs(across) <= 1e3 * eps * dist) | (jnp.abs(across) <= 64 * eps * scale)
 
 
 def project_to_conic(coef, q):
-    """The conic point nearest `q` along the gradient direction at `q` (one exact line cut)."""
+    """The conic point nearest `q` along the gradient direction at `q` (one exact line cut).
+
+    The gradient is `S (a, b, 1)` (MATH.md §2, seed 001 eq. 13-15 with `S` for `K^T`); the
+    cut is the quadratic `Q(q + h n)` in `h`."""
     t = conic_tangent(coef, q)
     n = jnp.stack([t[1], -t[0]])
     n = n / jnp.maximum(jnp.linalg.norm(n), jnp.finfo(n.dtype).tiny)
@@ -134,7 +143,8 @@ def project_to_conic(coef, q):
 
 def pencil_point(coef, anchor, tau, perp, phi):
     """The curve point cut by the line through `anchor` at pencil angle `phi`, and whether
-    the cut exists (`conic.conic_second_intersection`)."""
+    the cut exists (`conic.conic_second_intersection`; seed 001 §3.4.3's "new edge cuts
+    the curve", here a line through a curve point)."""
     d = jnp.cos(phi) * tau + jnp.sin(phi) * perp
     return conic_second_intersection(coef, anchor, d)
 
@@ -146,12 +156,14 @@ def opposite(f1, f2):
 
 def root_between(fg1, fg2):
     """A sign change of `f` in both orientations (`objectives.bracket_objective`'s `f` and
-    `g`) between two curve points: a root, not an orientation flip."""
+    `g`) between two curve points: a root, not an orientation flip (seed 001 §3.4.3's
+    "if f changes sign"; eq. 20-21, MATH.md §4)."""
     return opposite(fg1[0], fg2[0]) & opposite(fg1[1], fg2[1])
 
 
 def inside(ab, slack=None):
-    """`ab` in the closed triangle up to `slack` (default `64 eps`)."""
+    """`ab` in the closed triangle up to `slack` (default `64 eps`): seed 001 eq. 3's
+    `(a, b, a + b)` in `[0, 1]^3`."""
     slack = 64 * jnp.finfo(ab.dtype).eps if slack is None else slack
     return (ab[0] >= -slack) & (ab[1] >= -slack) & (ab[0] + ab[1] <= 1 + slack)
 
@@ -191,7 +203,7 @@ class FaceArcs(NamedTuple):
 def face_arcs(coef) -> FaceArcs:
     """Every arc of the conic `coef` inside its face: from each edge root, oriented inward,
     to the next crossing along the curve, plus an ellipse inside the face (no edge root),
-    anchored where the line `b = 1/3` meets it."""
+    anchored where the line `b = 1/3` meets it: the cases of seed 001 Fig. 5a-c."""
     A, B, C, D, E, F = coef
     scale = jnp.max(jnp.abs(coef))
     straight = jnp.max(jnp.abs(coef[:3])) <= 64 * jnp.finfo(coef.dtype).eps * scale
@@ -241,8 +253,9 @@ def conic_touches_face(coef):
 
 
 def trace_arcs(V, N, P, L, samples: int, return_arcs: bool = False):
-    """Sample every arc of the coplanarity conic on faces `(V, N)` `(F, 3, 3)` for one
-    receiver `P` and light `L`: `(ab, xyz, ok)` of shapes `(F, N_ARCS, samples, 2 | 3)`
+    """Sample every arc of the coplanarity conic (seed 001 Fig. 3, eq. 10-12) on faces
+    `(V, N)` `(F, 3, 3)` for one receiver `P` and light `L`: `(ab, xyz, ok)` of shapes
+    `(F, N_ARCS, samples, 2 | 3)`
     and `(F, N_ARCS, samples)`, `u` uniform in `[0, 1]` along each arc's pencil angle (the
     same parametrisation the walk refines on and the exhaustive reference scans).
 

@@ -25,7 +25,8 @@ from .geometry import dot
 
 @float_inputs("t", ints=("edge",))
 def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> Float[Array, "*batch 2"]:
-    """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (table above)."""
+    """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (seed 001 eq. 3;
+    table above)."""
     t = jnp.asarray(t)
     edge = jnp.asarray(edge)
     a = jnp.where(edge == 0, t, jnp.where(edge == 1, 1 - t, 0))
@@ -36,7 +37,8 @@ def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> F
 def edge_param_from_vertex_order(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]):
     """Map the table's `t` to `s` with `s = 0` at vertex `edge`, `s = 1` at vertex `edge + 1`.
 
-    The map is an involution (applying it twice gives `t` back).
+    The project's edge convention (table above; seed 001 fixes none). The map is an
+    involution (applying it twice gives `t` back).
     """
     return jnp.where(jnp.asarray(edge) == 2, 1 - t, t)
 

@@ -69,7 +69,8 @@ def conic_value(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) ->
 
 
 def symmetric_matrix(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3"]:
-    """Symmetric part `S = (K + K^T) / 2` of the conic, rebuilt from `A..F`."""
+    """Symmetric part `S = (K + K^T) / 2` of the conic, rebuilt from `A..F` (seed 001 eq. 12;
+    MATH.md §2: `S x` is half the gradient of `x^T K x`)."""
     A, B, C, D, E, F = jnp.moveaxis(coef, -1, 0)
     return jnp.stack(
         [
@@ -86,9 +87,10 @@ def conic_tangent(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) 
     """Tangent `(-v, u)` of the conic at `ab` in barycentric space (seed 001 eq. 13-15).
 
     `(u, v, w) = S (a, b, 1)` with the symmetric part `S`. The paper's eq. 14 multiplies by
-    `K^T`, which is the gradient direction only for symmetric `K` (MATH.md §2; the test
-    `test_paper_tangent_with_K_transpose_is_wrong` shows the difference). Not normalised:
-    its length is half the gradient's, zero at a singular point of the conic.
+    `K^T`, which is the gradient direction only for symmetric `K` (MATH.md §2;
+    `tests/test_conic.py::test_paper_tangent_with_K_transpose_is_wrong_away_from_M0`
+    shows the difference). Not normalised: its length is half the gradient's, zero at a
+    singular point of the conic.
     """
     A, B, C, D, E, F = jnp.moveaxis(coef, -1, 0)
     a, b = ab[..., 0], ab[..., 1]
@@ -184,7 +186,8 @@ def edge_intersections(coef: Float[Array, "*batch 6"], tol: float | None = None)
 
 
 def edge_intersection_points(t: Float[Array, "*batch 3 2"]) -> Float[Array, "*batch 3 2 2"]:
-    """Barycentric `(a, b)` of each edge root returned by `edge_intersections`."""
+    """Barycentric `(a, b)` of each edge root returned by `edge_intersections` (seed 001
+    eq. 22-24 as corrected in MATH.md §3; edge table of `barycentric.py`)."""
     edge = jnp.arange(3)[:, None]
     return edge_barycentric(jnp.broadcast_to(edge, t.shape), t)
 

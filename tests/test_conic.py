@@ -12,10 +12,12 @@ from hypothesis import strategies as st
 from caustics_jax import conic_coefficients, conic_tangent, edge_intersections
 from caustics_jax.conic import (
     conic_matrix,
+    conic_second_intersection,
     conic_value,
     edge_intersection_points,
     edge_quadratics,
     solve_quadratic,
+    symmetric_matrix,
 )
 from caustics_jax.testing import oracle, random_triangles
 
@@ -79,6 +81,35 @@ def test_conic_is_the_triple_product_everywhere():
                                rtol=1e-11, atol=1e-12)
     K = np.asarray(conic_matrix(*(jnp.asarray(x) for x in (V, N, P, L))))
     assert np.max(np.abs(K - np.swapaxes(K, -1, -2))) > 1e-3  # K is genuinely not symmetric
+
+
+def test_symmetric_matrix_is_the_symmetric_part_of_K():
+    """`symmetric_matrix(A..F)` rebuilds `S = (K + K^T) / 2` of MATH.md §2 from the six coefficients."""
+    V, N, P, L, _ = _config(19, 64)
+    args = [jnp.asarray(x) for x in (V, N, P, L)]
+    K = np.asarray(conic_matrix(*args))
+    S = np.asarray(symmetric_matrix(coef_j(*args)))
+    np.testing.assert_allclose(S, (K + np.swapaxes(K, -1, -2)) / 2, rtol=1e-12, atol=1e-14)
+
+
+def test_second_intersection_is_the_other_root_of_the_conic_on_the_line():
+    """`conic_second_intersection` from `M0` (on the conic) against `oracle.conic_on_line`.
+
+    On the line `ab0 + s d` the conic is `q2 s^2 + q1 s + q0` with `q0 = 0` at a curve
+    point, so the other point is at `s = -q1 / q2` (float64, numpy).
+    """
+    V, N, P, L, ab0 = _config(17, 256)
+    d = np.random.default_rng(17).normal(size=(256, 2))
+    coef = coef_j(*(jnp.asarray(x) for x in (V, N, P, L)))
+    ab, ok = (np.asarray(x) for x in conic_second_intersection(coef, jnp.asarray(ab0), jnp.asarray(d)))
+    q2, q1, _ = oracle.conic_on_line(np.asarray(coef), ab0, d)
+    s = -q1 / q2
+    near = np.abs(s) < 10  # farther: the line is nearly parallel to an asymptote
+    assert near.mean() > 0.8 and np.all(ok[near])  # measured 0.95
+    want = ab0 + s[:, None] * d
+    err = np.linalg.norm(ab - want, axis=-1) / (np.linalg.norm(ab0, axis=-1) + np.linalg.norm(want, axis=-1))
+    assert np.max(err[near]) < 1e-10  # measured 3.1e-14
+    assert np.all(conic_residual(coef, V, N, P, L, ab)[near] < RESID_TOL[jnp.float64])  # measured 1.7e-15
 
 
 @pytest.mark.parametrize("dtype", DTYPES)

@@ -1,7 +1,8 @@
 """The import graph of the `caustics_jax` package, read from the source (AST, nothing imported).
 
 Prints a Markdown section: a mermaid graph (one node per module, one arrow per import of
-another package module, imports inside functions included) and the same edges as a table.
+another package module, imports inside functions included) and the same edges as a table,
+with the first paragraph of each module's docstring (what it is for).
 Exits non-zero, after naming the offenders on stderr, when the graph has a cycle or when a
 module imports a private name (leading underscore, not a dunder) of another module, either
 as `from X import _name` or as an attribute `X._name` of an imported module. Private
@@ -36,6 +37,8 @@ class Module:
     private: list[tuple[int, str, str]] = field(default_factory=list)
     #: `(line, top-level name, at module level)` for every import from outside the package
     external: list[tuple[int, str, bool]] = field(default_factory=list)
+    #: first paragraph of the module docstring, on one line ("" without one)
+    summary: str = ""
 
 
 def is_private(name: str) -> bool:
@@ -87,6 +90,7 @@ def analyse(modules: dict[str, Module], package: str) -> None:
     """Fill each module's `imports`, `private` and `external` from its source."""
     for mod in modules.values():
         tree = ast.parse(mod.path.read_text(), filename=str(mod.path))
+        mod.summary = " ".join((ast.get_docstring(tree) or "").split("\n\n")[0].split())
         top = _module_level(tree)
         aliases: dict[str, str] = {}  # local name -> package module it is bound to
 
@@ -174,7 +178,8 @@ def build(package_dir: pathlib.Path = ROOT / "caustics_jax") -> dict[str, Module
 
 def markdown(modules: dict[str, Module], package: str) -> str:
     """The graph as a mermaid block, with each subpackage drawn as one node (its modules'
-    imports merged), and as a table of every module (module -> package modules it imports)."""
+    imports merged), and as a table of every module (module, what it is for, package modules
+    it imports)."""
 
     def short(name: str) -> str:
         return name[len(package) + 1:] if name != package else package
@@ -194,10 +199,11 @@ def markdown(modules: dict[str, Module], package: str) -> str:
         label = f"{package} (public API)" if name == package else label
         lines.append(f'    {node_id(name)}["{label}"]')
     lines += [f"    {node_id(a)} --> {node_id(b)}" for a, b in edges]
-    lines += ["```", "", "| module | imports (within the package) |", "|---|---|"]
+    lines += ["```", "", "| module | what it is for (docstring) | imports (within the package) |", "|---|---|---|"]
     for name in sorted(modules):
         targets = ", ".join(f"`{short(t)}`" for t in sorted(modules[name].imports)) or "(none)"
-        lines.append(f"| `{short(name)}` | {targets} |")
+        summary = modules[name].summary.replace("|", "\\|") or "(no docstring)"
+        lines.append(f"| `{short(name)}` | {summary} | {targets} |")
     n_edges = sum(len(m.imports) for m in modules.values())
     lines += ["", f"{len(modules)} modules, {n_edges} import edges (imports inside functions included); "
               f"the mermaid graph draws each subpackage (`name/`) as one node, {len(nodes)} nodes and "

@@ -46,6 +46,8 @@ def intensity_attenuation(t: Float[Array, "*batch"], t_max, gamma=GAMMA) -> Floa
 def schlick_f0(eta):
     """Normal-incidence reflectance `((eta - 1)/(eta + 1))^2`: Schlick's choice of `F_frac`.
 
+    `F_frac` of seed 004 eq. 14, which leaves it free (module docstring).
+
     A Python float for a Python number (a static constant, e.g. for `f_frac`), else an
     array by the kernels' input contract (`_precision.float_inputs`).
     """

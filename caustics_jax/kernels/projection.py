@@ -46,6 +46,8 @@ def ray_plane_intersection(
 ) -> tuple[Float[Array, "*batch 3"], Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """Exact intersection `(point, t, hit)` of `origin + t direction` with a plane (reference).
 
+    What seed 002 eq. 3.3's projection approximates (module docstring); no paper formula.
+
     `t = ((plane_point - origin) . n) / (direction . n)`; `hit` is False for a ray
     parallel to the plane or a plane behind the origin (`t < 0`), where `point = origin`.
     "Parallel" means `|direction . n| <= 4 eps |direction| |n|`: below that the cosine is

@@ -124,7 +124,8 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
                receiver_normal, eta: float = 1.333, sigma_t: float = 0.0, same_radius: float = 1e-6,
                **newton_options) -> EstimatorResult:
     """Biased SMS: `k` Newton solves per receiver from area-uniform random starts, the
-    distinct forward solutions summed (module docstring). `newton_options` go to
+    distinct forward solutions summed (Zeltner et al. 2020 §4.3; module docstring).
+    `newton_options` go to
     `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...)."""
     k = _check_count("k", k, 1)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal)
@@ -157,7 +158,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
                  eta: float = 1.333, sigma_t: float = 0.0, max_trials: int = 1000, same_radius: float = 1e-6,
                  **newton_options) -> EstimatorResult:
     """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
-    path's irradiance times the trial count (module docstring)."""
+    path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring)."""
     max_trials = _check_count("max_trials", max_trials, 1)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal)
     rng = np.random.default_rng(seed)

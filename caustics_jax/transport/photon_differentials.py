@@ -13,7 +13,7 @@ surface and lands on a receiver. Three estimates of how much its beam is compres
 - `compression_ratio_exact`: the same three rays, each intersected with the receiver
   plane: `A'_rec / A`. Same-`t'` puts the caustic triangle roughly orthogonal to the
   beam instead of on the receiver; seed 004 puts that back with the foreshortening
-  `a = 1/(-l_dir.n')` of eq. 18, so `sigma^2 a` estimates `A'_rec / A`.
+  `a = 1/(-l_dir.n')` of eq. 19, so `sigma^2 a` estimates `A'_rec / A`.
 - `texel_jacobian` / `photon_differential_irradiance`: the exact differential, the 2x2
   Jacobian by `jax.jacfwd` of "emission-plane point -> receiver-plane point" through the
   surface triangle (barycentrics extrapolated, interpolated normal, GLSL `refract`).
@@ -192,6 +192,9 @@ def texel_jacobian(
 ):
     """Exact photon differential: `J = d(receiver coords)/d(emission-plane xy)` by `jax.jacfwd`.
 
+    The Jacobian of seed 003's footprint and the exact reference for seed 004 eq. 10-11
+    (MATH.md §7).
+
     `V, N` the surface triangle the photon through emission point `X` hits (from the
     light `L`); the receiver plane `(receiver_point, receiver_normal)`, coordinates in
     `orthonormal_frame(receiver_normal)`. Returns `(J (2,2), Y (3,), T, cos_e, r_e, t,
@@ -210,6 +213,8 @@ def texel_jacobian(
 def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, receiver_normal,
                                    sigma_t=0.0):
     """Irradiance where the photon through `X` lands: `I_e T A cos_e / (r_e^2 |det J|)`.
+
+    MATH.md §7's flux bookkeeping, `Phi / A'`, with the exact landing area.
 
     Flux `I_e cos_e du dv / r_e^2` through the emission texel `du dv` (photons.py), times
     `T` and `A = exp(-sigma_t t)`, over its landing area `|det J| du dv` (`texel_jacobian`).
@@ -319,7 +324,11 @@ class LightViewTexels(NamedTuple):
 
 
 def light_view_texels(mesh: SurfaceMesh, L, res: int) -> LightViewTexels:
-    """Photons on a regular `res x res` texel grid over the emission plane covering `mesh`."""
+    """Photons on a regular `res x res` texel grid over the emission plane covering `mesh`.
+
+    The caustic-map texels of seed 004 §3.1 (Alg. 2 takes its neighbours `x10, x01` from
+    adjacent texels), on a `photons.EmissionPlane`.
+    """
     if res < 2:
         raise ValueError(f"res must be >= 2, got {res}")
     L_np = np.asarray(L, np.float64).reshape(3)

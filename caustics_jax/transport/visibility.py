@@ -1,11 +1,12 @@
-"""Visibility of a refracted path through the surface itself (seed 001 §4).
+"""Visibility of a refracted path through the surface itself (seed 001 §4, §6).
 
-Seed 001 §4 traces a ray from the refraction point `M` to the light `L` (and from the
-receiver `P` to `M`) to discard paths the scene blocks. Here the only occluder is the water
-surface: on steep waves, or under grazing light, the segment `M -> L` can leave the water
-at `M` and cross a wave crest before reaching the light, and `P -> M` can cross the
-surface from below before `M`. Such a path satisfies Snell's law at `M` yet carries no
-light.
+Seed 001 §4 traces one ray, from the refraction point `M` to the light `L`, to discard
+paths in shadow; §6 notes that it misses a second crossing of the refractive surface
+between `M` and `L` (light near the horizon, rough water). Testing `P -> M` as well is
+this project's extension. Here the only occluder is the water surface: on steep waves,
+or under grazing light, the segment `M -> L` can leave the water at `M` and cross a wave
+crest before reaching the light, and `P -> M` can cross the surface from below before
+`M`. Such a path satisfies Snell's law at `M` yet carries no light.
 
 A path is visible when neither segment crosses the surface anywhere but at `M`: each is
 tested with the start-point query (`start_points.first_crossing`, the first crossing of a
@@ -32,6 +33,9 @@ def visibility_eps(dtype) -> float:
 
 def path_visible(mesh, P, M, L) -> np.ndarray:
     """`(n,)` True where neither `P -> M` nor `M -> L` crosses the surface except at `M`.
+
+    `M -> L` is seed 001 §4's shadow ray (against the surface, the §6 limitation); `P -> M`
+    is this project's extension (module docstring).
 
     `P`, `M`, `L`: `(n, 3)` arrays (the mesh's dtype). One query of `2 n` segments.
     """

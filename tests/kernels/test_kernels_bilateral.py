@@ -155,7 +155,11 @@ def test_dark_pixels_sample_every_fifth_neighbour_out_to_fifteen(dtype):
 
 
 def _alg4_numpy(C, depth, pos, l_min, factor=0.114):
-    """Alg. 4 transcribed line by line (x sub-pass), Rec. 709 luminance."""
+    """Alg. 4 transcribed line by line (x sub-pass), Rec. 709 luminance, except line 7.
+
+    Line 7 prints `0.144 lum(LMin)`; `factor` is passed in instead and defaults to eq. 25's
+    0.114 (docs/kernels.md). Neighbours outside the image are skipped (Alg. 4 does not say).
+    """
     H, W, _ = C.shape
     out = np.empty_like(C)
     for y in range(H):

@@ -24,7 +24,12 @@ CONFIGS = [(16, 16, 2, 3), (32, 16, 2, 4), (64, 32, 4, 3), (16, 32, 4, 2), (24, 
 
 
 def alg1_transcribed(tid, ccm, s, line24="Region1", line26=">", line33="Region0"):
-    """Seed 004 Alg. 1 line by line (defaults: as printed), integer GPU arithmetic.
+    """Seed 004 Alg. 1 line by line, integer GPU arithmetic; lines 24, 26, 33 as printed by default.
+
+    One line is always fixed: line 16 loops `i = 0 to N - 1`, whose last `bound[i + 1]`
+    is one past the array (docs/kernels.md); the loop stops at `N - 2`, which changes
+    nothing for `tid` below the total thread count (beyond it, None). `%` is Python's
+    non-negative modulo, also on the negative `LocalTid` of line 24 as printed.
 
     `ccm` lists (x, y) thread extents per level as Alg. 1 indexes them: `ccm[i].x *
     ccm[i].y` must be the level's thread count, so levels > 0 are given as (count, 1).
