@@ -138,6 +138,64 @@ def check_points(name: str, value, dtype) -> np.ndarray:
     return X
 
 
+def check_fits(name: str, value, dtype):
+    """`value` (real numbers already checked finite in float64) stays finite when cast to
+    `dtype`, the computation's dtype: a float32 mesh refuses `eta=1e39` as it refuses
+    coordinates that overflow (`check_points`). Returns `value` unchanged."""
+    with np.errstate(over="ignore"):
+        cast = np.asarray(value, np.float64).astype(dtype)
+    if not np.all(np.isfinite(cast)):
+        raise ValueError(f"{name} overflows {np.dtype(dtype).name}, the mesh's dtype (largest "
+                         f"{float(np.finfo(dtype).max):.4g}), got {value!r}")
+    return value
+
+
+def check_tol_resolves(name: str, tol, dtype) -> None:
+    """A `ValueError` when an acceptance `tol` on the signed sine lies below `dtype`'s
+    machine epsilon: the sine is a difference of unit vectors, rounded to about `eps`, so
+    no point can be certified there (float32 `tol=1e-30` ended lanes NOT_CONVERGED or,
+    wrongly, TOTAL_INTERNAL_REFLECTION). `None` (the dtype's default) passes."""
+    if tol is None:
+        return
+    eps = float(np.finfo(dtype).eps)
+    if tol < eps:
+        raise ValueError(f"{name}={tol!r} is below {np.dtype(dtype).name}'s resolution of the signed sine "
+                         f"(eps {eps:.3g}): no point can be certified; use {name} >= {eps:.3g} or a float64 mesh")
+
+
+def scale_range(dtype) -> tuple[float, float]:
+    """`(smallest extent, largest coordinate)` of a scene the solvers resolve in `dtype`
+    (`check_scene_scale`): `tiny^(1/5)` and `max^(1/4) / 8` of the dtype, for the quartic
+    products of lengths the solvers form (the edge quadratics' discriminants, `D`'s products
+    of four lengths) and the fifth powers of their ratios. float32: 2.6e-8 and 5.4e8 m;
+    float64: 2.9e-62 and 1.4e76 m. Measured on the wavy pool scaled uniformly (float32):
+    every lane FOUND for scales 3e-9 .. 3e9 (extent 1.3e-8 m .. coordinates 9e9 m); at a
+    scale of 1e-9 three of 16 lanes, at 3e-10 all, read DEGENERATE, and at 1e10 five read
+    TOTAL_INTERNAL_REFLECTION. The D factor (`ray_differential_D`) overflows sooner: a unit
+    triangle scaled by 3e8 gives `D` to 1.1e-7 of `s^2 D(1)`, scaled by 1e9 it overflows (marked
+    invalid), hence the factor 8 (docs/input_contract.md "Scale")."""
+    info = np.finfo(dtype)
+    return float(info.tiny) ** 0.2, float(info.max) ** 0.25 / 8
+
+
+def check_scene_scale(vertices: np.ndarray, points: tuple, dtype) -> None:
+    """A `ValueError` when the scene lies outside `scale_range(dtype)`: its largest
+    coordinate (mesh vertices and every point of `points`) above the limit, or the extent of
+    the mesh (its bounding box's largest side) below it. Rescale the scene (metres to
+    kilometres, say) or use float64."""
+    lo, hi = scale_range(dtype)
+    name = np.dtype(dtype).name
+    big = max([float(np.max(np.abs(vertices), initial=0.0))]
+              + [float(np.max(np.abs(X), initial=0.0)) for X in points])
+    if big > hi:
+        raise ValueError(f"the scene's coordinates reach {big:.3g}, beyond what {name} resolves ({hi:.3g}: "
+                         f"quartic products of lengths overflow); rescale the scene or use float64")
+    extent = float(np.max(np.ptp(vertices, axis=0))) if vertices.size else 0.0
+    if 0 < extent < lo:
+        raise ValueError(f"the mesh spans {extent:.3g}, below what {name} resolves ({lo:.3g}: products of "
+                         f"lengths underflow); rescale the scene or use float64")
+
+
 def check_dtype(name: str, value) -> np.dtype:
     """A dtype-like naming float32 or float64 (not yet checked against x64; see
     `_precision.check_float_dtype`)."""

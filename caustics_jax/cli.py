@@ -303,7 +303,7 @@ def _conformance(args) -> int:
 
     argv = [args.data] + (["--kernels", *args.kernels] if args.kernels else [])
     argv += ["--scenes", *args.scenes] if args.scenes else []
-    return conformance.main(argv + (["--json", args.json] if args.json else []))
+    return conformance.main(argv + (["--json", args.json] if args.json else []), prog="caustics-jax conformance")
 
 
 def _add_export_args(p: argparse.ArgumentParser) -> None:

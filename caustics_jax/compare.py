@@ -34,7 +34,7 @@ import numpy as np
 
 from . import scenes
 from ._precision import precision
-from .arguments import check_bool, check_eta, check_int
+from .arguments import check_bool, check_eta, check_fits, check_int
 from .progress import progress
 from .reporting import log, stats
 from .scenes import MAX_TRIANGLES
@@ -195,6 +195,8 @@ class CompareConfig:
         bad = [d for d in self.dtypes if d not in ("float32", "float64")]
         if bad:
             raise ValueError(f"dtypes must be float32 and/or float64, got {bad}")
+        for dtype in self.dtypes:  # as solve refuses it, before the run
+            check_fits("eta", self.eta, np.dtype(dtype))
 
     def expected_solves(self) -> int:
         """Solver lanes the run will compute: `n` per configuration and dtype, timed

@@ -30,16 +30,23 @@ class ObjectiveStatus(enum.IntEnum):
 
 
 def path_vectors(V, N, P, L, ab):
-    """`M`, shading normal `n_s`, `w_P`, `w_L` at `ab` (MATH.md §1), and a degeneracy flag."""
+    """`M`, shading normal `n_s`, `w_P`, `w_L` at `ab` (MATH.md §1), and a degeneracy flag:
+    a zero vector among `n~`, `P - M`, `L - M`, or one whose length overflows the dtype (a
+    scene beyond `arguments.scale_range`: float32 `P - M` of 3e19 m normalised to 0 and
+    read as a root with status OK)."""
     M = barycentric_point(V, ab)
     n_tilde = interpolated_normal(N, ab)
     PM, LM = P - M, L - M
-    degenerate = (norm(n_tilde) == 0) | (norm(PM) == 0) | (norm(LM) == 0)
+    bad = lambda x: ~((norm(x) > 0) & jnp.isfinite(norm(x)))  # noqa: E731
+    degenerate = bad(n_tilde) | bad(PM) | bad(LM)
     return M, safe_normalize(n_tilde), safe_normalize(PM), safe_normalize(LM), degenerate
 
 
 def refracted_direction(V, N, P, L, ab, eta):
-    """`refract(-w_P, -n_s, eta)`: where the light arriving at `P` came from, seen at `M`."""
+    """`refract(-w_P, -n_s, eta)`: where the light arriving at `P` came from, seen at `M`.
+
+    Seed 001 eq. 19 with the GLSL `refract` of MATH.md §1.
+    """
     _, n_s, w_P, _, _ = path_vectors(V, N, P, L, ab)
     return refract(-w_P, -n_s, eta)
 
@@ -58,15 +65,16 @@ def signed_sine_and_status(
 
     `f = s |r x w_L|` with `r = refract(-w_P, -n_s, eta)`. `orientation` picks `s`:
 
-    - `"tangent"` (the paper's eq. 21): `s = sign(t_world . (r x w_L))`, `t_world` the
+    - `"tangent"` (the paper's eq. 20): `s = sign(t_world . (r x w_L))`, `t_world` the
       conic tangent (eq. 13-15) in world space. Ill-conditioned: `r`, `w_L` and the
       tangent all lie (nearly) in the plane through `P`, `L`, `M`, so `t . (r x w_L)` is
       proportional to how fast that plane turns along the curve; it is exactly 0 on a
       flat surface (constant normals: `tests/test_objectives.py::
       test_tangent_orientation_degenerates_with_constant_normals_while_plane_does_not`
-      measures it at rounding level), so in float32 its sign is noise on gentle waves,
-      and it flips at `M0` where `M` crosses
-      the line `PL` even though `|r x w_L|` does not vanish there.
+      measures it at rounding level), so its sign is noise there (float32 and float64
+      disagree on 49% of curve points; 0.13% at `normal_spread = 1e-3`, docs/conic.md),
+      and it flips at `M0` where `M` crosses the line `PL` even though `|r x w_L|` does
+      not vanish there (`test_tangent_orientation_flips_at_M0_while_plane_does_not`).
     - `"plane"`: `s = sign((r x w_L) . (PL x n_s))`. On the curve `n_s` lies in the plane
       through `P`, `L`, `M` (that is the coplanarity constraint), so `PL x n_s` is a
       normal of that plane, like `r x w_L`; unlike the conic tangent it is continuous

@@ -55,7 +55,16 @@ class Lights(eqx.Module):
     far: float = eqx.field(static=True, default=100.0)
 
     def endpoint(self, P: Float[Array, "*batch 3"], k: int = 0) -> Float[Array, "*batch 3"]:
-        """Segment end `L` for receivers `P` and light `k` (the light itself, or `P + far d`)."""
+        """Segment end `L` for receivers `P` `(..., 3)` and light `k` in `[0, K)` (the light
+        itself, or `P + far d`); in `P`'s float dtype (the lights' for integer `P`)."""
+        k = check_int("k", k, 0, len(self.directional) - 1)
+        P = jnp.asarray(P)
+        if P.ndim == 0 or P.shape[-1] != 3:
+            raise ValueError(f"P must have shape (..., 3), got {P.shape}")
+        if P.dtype == jnp.bool_ or not (jnp.issubdtype(P.dtype, jnp.floating) or jnp.issubdtype(P.dtype, jnp.integer)):
+            raise ValueError(f"P must hold real numbers, got dtype {P.dtype}")
+        if not jnp.issubdtype(P.dtype, jnp.floating):
+            P = P.astype(self.position.dtype)
         if self.directional[k]:
             return P + self.far * self.direction[k].astype(P.dtype)
         return jnp.broadcast_to(self.position[k].astype(P.dtype), P.shape)

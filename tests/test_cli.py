@@ -81,7 +81,8 @@ def _one_line_error(capsys, *needles):
 
 @pytest.mark.parametrize("argv, needle", [
     (["--eta", "-1"], "eta must be one finite positive"), (["--eta", "nan"], "eta must be one finite positive"),
-    (["--eta", "inf"], "eta"), (["--n", "0"], "n must be an integer"), (["--n", str(2**40)], "n must be an integer"),
+    (["--eta", "inf"], "eta"), (["--eta", "1e39"], "eta overflows float32"),
+    (["--n", "0"], "n must be an integer"), (["--n", str(2**40)], "n must be an integer"),
     (["--triangles", "-5"], "n_triangles"), (["--repeats", "0"], "repeats"), (["--seed", "-1"], "seed"),
     (["--ref-n", "-1"], "ref_n"), (["--sweep-n", "0"], "sweep_n"), (["--scene", "missing.obj"], "does not exist"),
     (["--scene", "ocean"], "scene must be one of"), (["--configs", "walk", "nonsense"], "unknown solver configs"),
@@ -160,3 +161,10 @@ def test_export_count_beyond_a_storage_buffer_is_refused_and_a_large_one_warns(c
     with pytest.raises(AssertionError, match="exported"):
         cli.main(["export", "--out", str(tmp_path / "e"), "--count", str(10**6)])
     assert "warning: --count 1000000" in capsys.readouterr().err
+
+
+def test_conformance_errors_carry_the_command_prefix(capsys, tmp_path):
+    """`caustics-jax conformance` prefixes its one-line errors like the other commands
+    (it printed `conformance: ...`)."""
+    assert cli.main(["conformance", str(tmp_path / "missing")]) == 2
+    _one_line_error(capsys, "caustics-jax conformance: ", "no exported kernels or scenes")

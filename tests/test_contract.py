@@ -11,7 +11,7 @@ import pytest
 
 import caustics_jax as cj
 import caustics_jax.kernels as K
-from caustics_jax import compare, scenes
+from caustics_jax import arguments, compare, scenes
 from caustics_jax.solvers import _solve
 
 # --------------------------------------------------------------------------- kernels
@@ -356,6 +356,105 @@ def test_a_bad_irradiance_argument_is_a_value_error_naming_it(pool, no_jit_work,
 
 
 @pytest.mark.parametrize("kwargs, match", [
+    (dict(eta=1e39), "eta overflows float32"), (dict(intensity=1e39), "intensity overflows float32"),
+    (dict(sigma_t=1e39), "sigma_t overflows float32"), (dict(tol=1e-30), "below float32's resolution"),
+    (dict(tol=1e-8), "below float32's resolution"), (dict(method="trace"), "returns every path"),
+    (dict(method=cj.Trace()), "returns every path"), (dict(method="exhaustive", return_all=True), "returns every path"),
+])
+def test_values_the_mesh_dtype_cannot_hold_or_resolve_are_refused(pool, no_jit_work, kwargs, match):
+    """Scalars are checked against the dtype they are cast to (float32 `eta=1e39` had run
+    as inf and ended every lane LEFT_MESH), a `tol` below the dtype's epsilon can certify no
+    point, and `irradiance` refuses a solver returning every path without `all_paths`."""
+    mesh, P, L = pool
+    irr = dict(intensity=1.0, receiver_normal=[0, 0, 1]) | kwargs
+    with pytest.raises(ValueError, match=match):
+        cj.irradiance(mesh, P, L, **irr)
+    solve_kwargs = {k: v for k, v in kwargs.items() if k not in ("intensity", "sigma_t")}
+    if solve_kwargs and "method" not in solve_kwargs:
+        with pytest.raises(ValueError, match=match):
+            cj.solve(mesh, P, L, **solve_kwargs)
+
+
+def test_a_float32_tol_at_its_epsilon_is_accepted():
+    arguments.check_tol_resolves("tol", float(np.finfo(np.float32).eps), np.float32)
+    arguments.check_tol_resolves("tol", 1e-12, np.float64)
+
+
+@pytest.mark.parametrize("scale, match", [(1e9, "beyond what float32 resolves"), (1e-9, "below what float32 resolves")])
+def test_a_scene_outside_the_dtype_scale_band_is_refused(pool, no_jit_work, scale, match):
+    """`arguments.scale_range`: float32 scenes scaled by 1e10 had read TOTAL_INTERNAL_REFLECTION
+    and by 1e-9 DEGENERATE; the band's ends are refused, naming the limit."""
+    mesh, P, L = pool
+    V, F, N = (np.asarray(x, np.float64) for x in (mesh.vertices, mesh.faces, mesh.normals))
+    big = cj.SurfaceMesh.from_arrays(V * scale, F.astype(int), N, dtype="float32")
+    with pytest.raises(ValueError, match=match):
+        cj.solve(big, P * scale, L * scale)
+    with pytest.raises(ValueError, match=match):
+        cj.irradiance(big, P * scale, L * scale, intensity=1.0, receiver_normal=[0, 0, 1])
+
+
+def test_scale_range_is_the_quartic_band_of_each_dtype():
+    lo32, hi32 = arguments.scale_range(np.float32)
+    lo64, hi64 = arguments.scale_range(np.float64)
+    assert 2.5e-8 < lo32 < 2.7e-8 and 5.3e8 < hi32 < 5.4e8
+    assert lo64 < 1e-60 and hi64 > 1e76
+    # the quartic of the largest coordinate stays 8^4 below the dtype's largest number
+    assert float(np.float32(hi32)) ** 4 * 8**4 <= float(np.finfo(np.float32).max) * 1.0001
+
+
+@pytest.mark.parametrize("scale", [1e-7, 1e8])
+def test_a_float32_scene_inside_the_scale_band_solves_as_at_unit_scale(pool, scale):
+    """Measured band (docs/input_contract.md "Scale"): the walk finds the same lanes and
+    points (relative to the scene size) at scales 1e-7 and 1e8 as at 1."""
+    mesh, P, L = pool
+    V, F, N = (np.asarray(x, np.float64) for x in (mesh.vertices, mesh.faces, mesh.normals))
+    scaled = cj.SurfaceMesh.from_arrays(V * scale, F.astype(int), N, dtype="float32")
+    ref, got = cj.solve(mesh, P, L), cj.solve(scaled, P * scale, L * scale)
+    np.testing.assert_array_equal(np.asarray(got.status), np.asarray(ref.status))
+    found = np.asarray(ref.found)
+    np.testing.assert_allclose(np.asarray(got.point)[found] / scale, np.asarray(ref.point)[found], atol=2e-5)
+
+
+def test_a_start_off_its_face_is_refused(pool, no_jit_work):
+    """A barycentric outside the closed face is not on the face's conic: `(5, 5)` had given
+    FOUND on 3 of 16 lanes and wrong TIR / LEFT_MESH statuses on the rest."""
+    mesh, P, L = pool
+    sp = cj.start_points(mesh, P, L)
+    ab = np.asarray(sp.barycentric).copy()
+    ab[3] = (0.7, 0.5)
+    with pytest.raises(ValueError, match=r"closed face .* at lanes \[3\]"):
+        cj.solve(mesh, P, L, start=(np.asarray(sp.face), ab, np.asarray(sp.found)))
+
+
+@pytest.mark.parametrize("length", [1e-20, 1e-3, 1e20, 1e39])
+def test_a_receiver_normal_of_any_finite_length_gives_the_unit_normal_result(pool, length):
+    mesh, P, L = pool
+    want = np.asarray(cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0.0, 0.6, 0.8]))
+    got = np.asarray(cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0.0, 0.6 * length, 0.8 * length]))
+    assert np.all(want > 0)
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+
+
+def test_light_endpoint_checks_its_light_index_and_points():
+    sc = scenes.wavy_pool(8, n_receivers=2)
+    P = np.asarray(sc.receivers)
+    with pytest.raises(ValueError, match="k must be an integer"):
+        sc.lights.endpoint(P, 5)
+    with pytest.raises(ValueError, match="k must be an integer"):
+        sc.lights.endpoint(P, -1)
+    with pytest.raises(ValueError, match=r"P must have shape \(\.\.\., 3\)"):
+        sc.lights.endpoint(P[:, :2])
+    np.testing.assert_array_equal(np.asarray(sc.lights.endpoint(P.tolist())), np.asarray(sc.lights.endpoint(P)))
+
+
+def test_photon_irradiance_takes_a_prepared_surface_as_solve_does(pool):
+    mesh, _, _ = pool
+    args = dict(intensity=1.0, receiver=cj.ReceiverGrid(-1.0, -2, 2, -2, 2, 4, 4), n_photons=0)
+    got = cj.photon_irradiance(cj.prepare(mesh), np.array([0.4, -0.3, 3.0]), **args)
+    assert got.n_photons == 0
+
+
+@pytest.mark.parametrize("kwargs, match", [
     (dict(n_photons=-5), "n_photons"), (dict(n_photons=1.5), "n_photons"), (dict(n_photons="10"), "n_photons"),
     (dict(n_photons=True), "n_photons"), (dict(n_photons=2**40), "n_photons"), (dict(chunk=0), "chunk"),
     (dict(chunk=1.5), "chunk"), (dict(seed=-1), "seed"), (dict(seed="x"), "seed"), (dict(intensity=-1.0), "intensity"),
@@ -366,7 +465,8 @@ def test_a_bad_irradiance_argument_is_a_value_error_naming_it(pool, no_jit_work,
     (dict(receiver=(1.0, -2, 2, -2, 2, 8, 8)), "receiver"),
     (dict(receiver=None), "receiver"), (dict(L=np.array([0, 0, -5.0])), "L"), (dict(L=np.zeros(2)), "L"),
     (dict(L=np.array([0, np.nan, 3])), "L"), (dict(L="x"), "L"), (dict(L=np.ones(3, bool)), "L"),
-    (dict(progress=1), "progress"),
+    (dict(progress=1), "progress"), (dict(eta=1e39), "eta overflows float32"),
+    (dict(intensity=1e39), "intensity overflows float32"), (dict(sigma_t=1e39), "sigma_t overflows float32"),
 ])
 def test_a_bad_photon_irradiance_argument_is_a_value_error_naming_it(pool, kwargs, match):
     mesh, _, _ = pool

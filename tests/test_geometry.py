@@ -153,3 +153,18 @@ def test_precision_context_switches_float64_on_and_back_off():
 
         with cj.precision("int32"):
             pass
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_safe_normalize_is_unit_in_range_and_zero_where_the_square_leaves_it(dtype):
+    """As documented: a unit vector wherever `v . v` is a normal number of the dtype, the
+    zero vector (never NaN) where it underflows or overflows; `path_vectors` reads such a
+    lane as degenerate (`test_objectives`)."""
+    info = np.finfo(dtype)
+    d = np.array([0.6, -0.48, 0.64])
+    inside = jnp.asarray(np.stack([d * s for s in (np.sqrt(float(info.tiny)) * 4, 1e-3, 1.0, 1e3,
+                                                   np.sqrt(float(info.max)) / 4)]), dtype)
+    np.testing.assert_allclose(np.asarray(safe_normalize(inside)), np.broadcast_to(d, inside.shape),
+                               rtol=4 * float(info.eps))
+    outside = jnp.asarray(np.stack([d * np.sqrt(float(info.tiny)) / 8, d * np.sqrt(float(info.max)) * 8]), dtype)
+    assert np.all(np.asarray(safe_normalize(outside)) == 0)

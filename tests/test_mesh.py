@@ -356,3 +356,18 @@ def test_legitimate_meshes_do_not_warn_about_winding():
         remap[used] = np.arange(len(used))
         assert _user_warnings(lambda V_=V_, F_=F_, used=used, remap=remap: SurfaceMesh.from_arrays(
             V_[used], remap[F_])) == [], name
+
+
+
+def test_a_float64_face_that_float32_collapses_is_kept_and_solved_around():
+    """Zero area is judged on the input (float64 here): a face 1e-5 high at x = 1000 is a
+    triangle in float64 and a segment once stored in float32, and is accepted, as the
+    stress suite's `sliver` category accepts needles below float32 resolution (its solvers
+    find every planted path there, docs/stability.md). The same vertices given as float32
+    arrays are refused: in float32 the face has no area to begin with."""
+    o = 1000.0
+    V = np.array([[o, o, 0], [o + 1, o, 0], [o + 0.5, o + 1e-5, 0], [o, o + 1, 0]])
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    SurfaceMesh.from_arrays(V, F, dtype="float32")
+    with pytest.raises(ValueError, match=r"degenerate faces \(zero area\): faces \[0\]"):
+        SurfaceMesh.from_arrays(V.astype(np.float32), F)

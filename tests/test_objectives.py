@@ -49,6 +49,18 @@ def test_every_objective_vanishes_at_planted_solutions(dtype, seed, eta):
     assert np.max(np.abs(np.asarray(ang))) < tol
 
 
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_refracted_direction_is_w_L_at_planted_solutions(dtype):
+    """`refracted_direction` = `refract(-w_P, -n_s, eta)` (seed 001 eq. 19) equals `w_L` on a path."""
+    from caustics_jax.objectives import refracted_direction
+
+    p = planted_paths(19, 256)
+    r = np.asarray(refracted_direction(*_cast(p, dtype), p.eta))
+    assert r.dtype == dtype
+    # measured max abs component error 4.3e-7 (float32), 6.7e-16 (float64)
+    np.testing.assert_allclose(r, oracle.unit(p.L - p.M), atol={jnp.float32: 2e-6, jnp.float64: 1e-13}[dtype])
+
+
 def _signed_sine_reference(V, N, P, L, ab, eta):
     """Float64 numpy seed 001 eq. 19-21 on the oracle, independent of the package's kernels."""
     M = oracle.barycentric_point(V, ab)
@@ -90,7 +102,7 @@ def test_signed_sine_matches_independent_reference_including_sign():
 
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_signed_sine_changes_sign_across_planted_solution_along_the_curve(dtype):
-    """The orientation s of eq. 21 makes f continuous through its zero: f(-h) f(+h) < 0.
+    """The orientation s of eq. 20 makes f continuous through its zero: f(-h) f(+h) < 0.
 
     Without the sign (f = |sin|) every bracket test of the walk would fail.
     """
@@ -179,3 +191,54 @@ def test_tangent_orientation_degenerates_with_constant_normals_while_plane_does_
         f_sides.append(np.asarray(f))
     assert ok.mean() > 0.9
     assert np.all(f_sides[0][ok] * f_sides[1][ok] < 0)
+
+
+def _m0_barycentric(V, P, L):
+    """`(a, b)` of `M0`, where the line PL meets the triangle's plane (seed 001 §3.4.2)."""
+    E1, E2 = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
+    n_g = np.cross(E1, E2)
+    s = np.sum(n_g * (V[:, 0] - P), -1) / np.sum(n_g * (L - P), -1)
+    X = P + s[:, None] * (L - P)
+    G = np.stack([E1, E2], -1)
+    Gt = np.swapaxes(G, -1, -2)
+    return np.linalg.solve(Gt @ G, Gt @ (X - V[:, 0])[..., None])[..., 0]
+
+
+def test_tangent_orientation_flips_at_M0_while_plane_does_not():
+    """The paper's sign (eq. 20) flips where M crosses the line PL; "plane"'s does not.
+
+    Near `M0` the plane through P, L, M turns around PL, and `t . (r x w_L)` is proportional
+    to the distance of M from PL times that turning rate, so it changes sign at `M0` even
+    though `|r x w_L|` stays of order one there (no root). `PL x n_s` is continuous through
+    `M0`, so the "plane" f keeps its sign. Curved triangles (normal_spread 0.3), float64.
+    """
+    p = planted_paths(37, 64, normal_spread=0.3)
+    coef = conic_coefficients(*(jnp.asarray(x) for x in (p.V, p.N, p.P, p.L)))
+    p0 = p._replace(ab=_m0_barycentric(p.V, p.P, p.L))
+    (ab_minus, ok_minus), (ab_plus, ok_plus) = (_points_on_curve_near(p0, coef, da) for da in (-1e-3, 1e-3))
+    # the three points per lane (before, at, after M0) in one batch: one compile
+    args = [jnp.asarray(np.concatenate([x] * 3)) for x in (p.V, p.N, p.P, p.L)]
+    ab = jnp.asarray(np.concatenate([ab_minus, p0.ab, ab_plus]))
+    both = jax.jit(lambda *a: [signed_sine_and_status(*a, p.eta, o) for o in ("tangent", "plane")])
+    (f_tan, status), (f_plane, _) = both(*args, ab)
+    f_tan, f_plane, status = (np.asarray(x).reshape(3, -1) for x in (f_tan, f_plane, status))
+    ok = ok_minus & ok_plus & np.all(status == ObjectiveStatus.OK, 0)
+    assert ok.mean() > 0.5  # measured 0.69 (the rest: curve nearly parallel to a = const)
+    assert np.min(np.abs(f_plane[1])[ok]) > 1e-2  # |r x w_L| at M0: measured min 0.037
+    assert np.min(np.abs(f_tan[[0, 2]])[:, ok]) > 1e-2  # measured min 0.036: no rounding noise
+    assert np.all(f_tan[0][ok] * f_tan[2][ok] < 0)
+    assert np.all(f_plane[0][ok] * f_plane[2][ok] > 0)
+
+
+def test_a_path_whose_lengths_overflow_the_dtype_is_degenerate_not_a_root():
+    """float32, a unit triangle scaled by 1e19: `P - M` squares past the range, normalises to
+    0, and the sine came out 0 with status OK (a false root). Now DEGENERATE; at 1e8 (inside
+    `arguments.scale_range`) the sine is the unit-scale one."""
+    V = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    N = np.tile(np.float32([0, 0, 1]), (3, 1))
+    P, L, ab = np.float32([0.2, 0.3, -1]), np.float32([0.4, 0.2, 3]), np.float32([0.3, 0.3])
+    s = np.float32([1.0, 1e8, 1e19])[:, None]
+    f, status = (np.asarray(x) for x in signed_sine_and_status(V * s[:, None], N, P * s, L * s, ab, 1.333))
+    assert list(status) == [ObjectiveStatus.OK, ObjectiveStatus.OK, ObjectiveStatus.DEGENERATE]
+    np.testing.assert_allclose(f[1], f[0], rtol=1e-5)
+    assert f[0] != 0

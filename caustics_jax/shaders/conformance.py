@@ -126,10 +126,12 @@ def format_table(reports: list[dict]) -> str:
     return "\n".join(rows)
 
 
-def main(argv=None) -> int:
+def main(argv=None, prog: str = "python -m caustics_jax.shaders.conformance") -> int:
+    """The command line (`caustics-jax conformance` passes its own `prog`, which prefixes
+    every message)."""
     from . import scene_conformance as sc
 
-    p = argparse.ArgumentParser(prog="python -m caustics_jax.shaders.conformance", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("data", help="directory written by `caustics-jax export`")
     p.add_argument("--kernels", nargs="+", default=None, choices=sorted(ex.KERNELS))
     p.add_argument("--scenes", nargs="+", default=None, choices=sorted(ex.SCENES))
@@ -139,16 +141,16 @@ def main(argv=None) -> int:
     kernels = args.kernels if args.kernels or args.scenes else [k for k in ex.KERNELS if (data / f"{k}.json").exists()]
     scenes = args.scenes if args.scenes or args.kernels else [s for s in ex.SCENES if (data / f"{s}.json").exists()]
     if not kernels and not scenes:
-        print(f"conformance: no exported kernels or scenes in {data}", file=sys.stderr)
+        print(f"{prog}: no exported kernels or scenes in {data}", file=sys.stderr)
         return 2
     try:
         reports = run_conformance(data, kernels) if kernels else []
         scene_reports = sc.run_scenes(data, scenes) if scenes else []
     except Unavailable as exc:
-        print(f"conformance: skipped, {exc}", file=sys.stderr)
+        print(f"{prog}: skipped, {exc}", file=sys.stderr)
         return 3
     except ValueError as exc:
-        print(f"conformance: {exc}", file=sys.stderr)
+        print(f"{prog}: {exc}", file=sys.stderr)
         return 2
     print(f"device: {(reports or scene_reports)[0]['device']}")
     if reports:

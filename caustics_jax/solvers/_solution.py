@@ -60,7 +60,9 @@ class Solution(eqx.Module):
         found: `(N,)` True exactly where `status == Status.FOUND`.
         status: `(N,)` int32 `Status` code.
         iterations: `(N,)` solver iterations (triangle crossings plus refinement steps).
-        residual: `(N,)` signed sine (seed 001 eq. 21) at `point`.
+        residual: `(N,)` signed sine (seed 001 eq. 21) at `point`, with the "plane" sign
+            (`signed_sine(..., orientation="plane")`; the default "tangent" sign can be the
+            opposite: only `abs(residual)` is comparable across orientations).
         crossed: `(N,)` triangles entered after the start triangle.
         start_point: `(N, 3)` the start point `M0`.
     """

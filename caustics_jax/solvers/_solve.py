@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
-from ..arguments import check_points
+from ..arguments import check_fits, check_points, check_scene_scale, check_tol_resolves
 from ..compilation import enable_compilation_cache
 from ..features import GENERAL, SceneFeatures
 from ..features import check as check_features
@@ -55,6 +55,7 @@ def check_lanes(mesh: SurfaceMesh, P, L):
     """`P`, `L` broadcast to `(N, 3)` in the mesh's dtype (see `check_points`)."""
     dtype = mesh.dtype
     P_np, L_np = (check_points(name, X, dtype) for name, X in (("P", P), ("L", L)))
+    check_scene_scale(np.asarray(mesh.vertices), (P_np, L_np), dtype)
     try:
         P_np, L_np = np.broadcast_arrays(P_np.reshape(-1, 3) if P_np.ndim == 1 else P_np,
                                          L_np.reshape(-1, 3) if L_np.ndim == 1 else L_np)
@@ -64,6 +65,14 @@ def check_lanes(mesh: SurfaceMesh, P, L):
         raise ValueError(f"P and L must broadcast to (N, 3), got {P_np.shape}")
     # (cast and copied on the host: jnp.asarray of a numpy array compiles once per shape)
     return jax.device_put(P_np.astype(dtype)), jax.device_put(L_np.astype(dtype))
+
+
+def returns_every_path(method, options: dict) -> bool:
+    """Whether `solve(..., method=method, **options)` returns every path per receiver (an
+    `ExhaustiveSolution`: `Trace`, `Exhaustive(return_all=True)`, `solutions="all"`); a
+    `ValueError` for a bad method or option, as `solve` would raise."""
+    solver = solver_from(*with_solutions(method, options))
+    return isinstance(solver, Trace) or (isinstance(solver, Exhaustive) and solver.return_all)
 
 
 def check_start(start, n: int, dtype, n_faces: int | None = None) -> StartPoint | None:
@@ -88,6 +97,14 @@ def check_start(start, n: int, dtype, n_faces: int | None = None) -> StartPoint 
     if bad.size:
         raise ValueError(f"start: face must lie in [0, {n_faces}) where found, got {face[bad[:5]].tolist()} "
                          f"at lanes {bad[:5].tolist()}")
+    # The walk and Newton start on the face: a point outside it is not on the face's conic
+    # (5.0 gave FOUND 3 of 16 lanes and wrong TIR / LEFT_MESH statuses for the rest).
+    a, b = ab[..., 0], ab[..., 1]
+    slack = 1e-5  # rounding of a float32 start point computed elsewhere
+    bad = np.flatnonzero(found & ((a < -slack) | (b < -slack) | (a + b > 1 + slack)))
+    if bad.size:
+        raise ValueError(f"start: barycentric must lie in the closed face (a, b >= 0, a + b <= 1, to {slack:g}) "
+                         f"where found, got {ab[bad[:5]].tolist()} at lanes {bad[:5].tolist()}")
     return StartPoint(jnp.asarray(np.where(found, face, -1), jnp.int32), jnp.asarray(ab, dtype),
                       jnp.asarray(found, bool))
 
@@ -124,7 +141,9 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
             (`n_starts=1`) skip what the scene does not need: lanes whose segment cannot
             reach the surface skip the start-point search, lanes without a start point
             skip the solver (`NO_CROSSING`), and on a flat surface the walk's points come
-            in closed form (`solvers/flat.py`). Same statuses and points as `None`
+            in closed form (`solvers/flat.py`). Same statuses and points as `None`,
+            except on flat surfaces: points within 6.8e-6 m (float32), 6.2e-11 m
+            (float64), and a few lanes the walk ends LOST_CURVE are FOUND
             (docs/features.md); `iterations` and `crossed` of closed-form lanes count the
             root solve's halvings and no crossings. Ignored by "exhaustive".
         **options: the solver's options when `method` is a name (`Walk`, `Newton`,
@@ -144,9 +163,10 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
     prep = prepare(mesh)
     solver = solver_from(*with_solutions(method, options))
     P, L = check_lanes(prep.mesh, P, L)
-    eta = check_eta(eta)
-    check_features(features)
     n, dtype = P.shape[0], prep.dtype
+    eta = check_fits("eta", check_eta(eta), dtype)
+    check_tol_resolves("tol", getattr(solver, "tol", None), dtype)
+    check_features(features)
     start = check_start(start, n, dtype, prep.mesh.faces.shape[0])
     if isinstance(solver, Exhaustive):
         if n == 0:

@@ -34,7 +34,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._precision import float_inputs
-from ..arguments import check_bool, check_points, check_real, real_array
+from ..arguments import check_bool, check_fits, check_points, check_real, real_array
 from ..barycentric import barycentric_coordinates, barycentric_point
 from ..features import check as check_features
 from ..geometry import dot, fresnel_transmittance, norm, safe_normalize
@@ -42,7 +42,7 @@ from ..lanes import compact_index, scatter_lanes
 from ..mesh import SurfaceMesh
 from ..objectives import path_vectors
 from ..prepared import PreparedSurface, prepare
-from ..solvers import solve
+from ..solvers import Exhaustive, Trace, returns_every_path, solve
 from .differentials import ray_differential_D
 from .visibility import path_visible
 
@@ -99,10 +99,14 @@ def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
         n_P = np.broadcast_to(n_P, (n, 3))
     except ValueError as exc:
         raise ValueError(f"receiver_normal {n_P.shape} does not broadcast to ({n}, 3)") from exc
-    length = np.linalg.norm(n_P, axis=-1)
-    if not np.all(np.isfinite(length)) or np.any(length == 0):
+    # Normalised here, in float64 and scaled by the largest component first, so that a
+    # finite normal of any length (1e-160 or 1e160) gives the unit normal, also once cast
+    # to float32 (safe_normalize of a float32 1e20 vector squares past the range).
+    big = np.max(np.abs(n_P), axis=-1, keepdims=True)
+    if not np.all(np.isfinite(big)) or np.any(big == 0):
         raise ValueError("receiver_normal must be finite and non-zero")
-    return n_P
+    n_P = n_P / big
+    return n_P / np.linalg.norm(n_P, axis=-1, keepdims=True)
 
 
 def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: float = 1.333, receiver_normal,
@@ -144,13 +148,20 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     sigma_t = check_real("sigma_t", sigma_t, 0)
     all_paths, return_solution = check_bool("all_paths", all_paths), check_bool("return_solution", return_solution)
     check_features(features)
-    if all_paths and method not in ("exhaustive", "walk", "trace"):
+    if all_paths and not (method in ("exhaustive", "walk", "trace") or isinstance(method, Exhaustive | Trace)):
         raise ValueError("all_paths=True sums every solution: it needs method='exhaustive' (every path "
                          "on the mesh) or 'walk' (every path on the traced curve)")
     if not isinstance(visibility, bool | np.bool_):
         raise ValueError(f"visibility must be True or False, got {visibility!r}")
+    # A solver that returns every path per receiver (`Trace`, `Exhaustive(return_all=True)`,
+    # `solutions="all"`) is summed only with all_paths.
+    if not all_paths and returns_every_path(method, options):
+        raise ValueError(f"method {method!r} with options {options} returns every path per receiver: pass "
+                         "all_paths=True to sum them")
     prep = prepare(mesh)
     mesh, dtype = prep.mesh, prep.dtype
+    check_fits("intensity", intensity_np, dtype)
+    check_fits("sigma_t", sigma_t, dtype)
     n = _lane_count(check_points("P", P, dtype), check_points("L", L, dtype))
     n_P = _check_receiver_normal(receiver_normal, n)
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):

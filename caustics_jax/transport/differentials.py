@@ -25,12 +25,13 @@ Signs, measured against `autodiff_D` (`tests/transport/test_differentials.py`,
 - So the extracted eq. 28-31 mix two readings of `w_P'`; negating the `w_P'.n_s` of
   eq. 30 alone, or eq. 28 together with eq. 31's `eta` term, makes them consistent.
   These two readings agree with the exact Jacobian (to 1e-11 relative, float64): the true
-  derivative with respect to `w_P`, used here (`M' = -d_P (...)`, eq. 30 as printed,
-  eq. 31 with `-eta`, `n_s'` from the barycentrics of this `M'`), and its global
-  negation (eq. 28 and eq. 31 as extracted, `-w_P'.n_s` in eq. 30), which flips `L'`
-  and keeps `D`. MATH.md §6's reading, eq. 28 as printed with `-eta` in eq. 31, is
-  wrong even on flat triangles (median relative error 0.7, up to 1e3); so are eq. 28-31
-  exactly as extracted, `+eta` with the true `M'`, a negated `mu'` (0.15 to 0.75).
+  derivative with respect to `w_P`, used here and in MATH.md §6 (`M' = -d_P (...)`,
+  eq. 30 as printed, eq. 31 with `-eta`, `n_s'` from the barycentrics of this `M'`), and
+  its global negation (eq. 28 and eq. 31 as extracted, `-w_P'.n_s` in eq. 30), which
+  flips `L'` and keeps `D`. Flipping `M'` alone (eq. 28 as printed with `-eta` in
+  eq. 31) is wrong even on flat triangles (median relative error 0.7, up to 1e3; at
+  `eta = 1` it gives `(d_P - d_L)^2`, as MATH.md §6 says); so are eq. 28-31 exactly as
+  extracted, `+eta` with the true `M'`, a negated `mu'` (0.15 to 0.75).
 - The paper leaves `n_s'` implicit: `n_s' = (I - n_s n_s^T) n~' / |n~|` with
   `n~' = (n1 - n0) a' + (n2 - n0) b'`, `(a', b')` the barycentric coordinates of `M'`
   (MATH.md §6). Dropping it is exact only on flat (constant-normal) triangles (median
@@ -105,7 +106,8 @@ def ray_differential_D(
     (nearly) parallel to the triangle, `P` is not behind the shading normal
     (`w_P.n_s >= 0`), the refraction is total internal reflection, or `w_L` does not
     leave on the light side (`w_L.n_s <= sqrt(eps)`); "nearly" means a sine or cosine
-    below `sqrt(eps)` of the dtype.
+    below `sqrt(eps)` of the dtype; also where `D` overflows (not finite, or 0 through an
+    overflowed intermediate: a scene beyond `arguments.scale_range`).
     """
     M, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
     dtype = M.dtype
@@ -138,6 +140,10 @@ def ray_differential_D(
     w_L_d = -eta[..., None, None] * W + mu_d[..., None] * v(n_s) + s(mu) * n_s_d
     L_d = M_d - dot(M_d, v(w_L))[..., None] * v(w_L) + s(d_L) * w_L_d
     D = norm(jnp.cross(L_d[..., 0, :], L_d[..., 1, :]))
+    # A scene beyond the dtype's range (`arguments.scale_range`; float32 lengths near 1e9:
+    # D grows as a product of four lengths) overflows to inf, or to 0 through an overflowed
+    # barycentric solve: neither is a valid D (docs/input_contract.md "Scale").
+    valid = valid & jnp.isfinite(D) & (D > 0)
     return jnp.where(valid, D, 0), valid
 
 

@@ -30,10 +30,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arguments import check_eta, check_int, check_points, check_real
+from ..arguments import check_eta, check_fits, check_int, check_points, check_real
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
+from ..prepared import PreparedSurface
 from ..progress import progress as progress_bar
 from ..start_points import build_bvh, first_crossing
 
@@ -207,7 +208,7 @@ def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total
     return Y[:, :2], w.astype(dtype), valid
 
 
-def photon_irradiance(mesh: SurfaceMesh, L, *, intensity: float, eta: float = 1.333,
+def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: float, eta: float = 1.333,
                       receiver: ReceiverGrid, n_photons: int, seed: int = 0,
                       sigma_t: float = 0.0, chunk: int = 1 << 16, progress=None) -> PhotonMap:
     """Brute-force caustic irradiance on `receiver` from a point light at `L` (module docstring).
@@ -227,15 +228,17 @@ def photon_irradiance(mesh: SurfaceMesh, L, *, intensity: float, eta: float = 1.
 
     Traced in the mesh's dtype; binned in float64.
     """
+    if isinstance(mesh, PreparedSurface):  # as solve and irradiance take it
+        mesh = mesh.mesh
     if not isinstance(mesh, SurfaceMesh):
-        raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
+        raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh or PreparedSurface, got {type(mesh).__name__}")
     receiver = ReceiverGrid.check(receiver, allow_empty=True)
     n_photons = check_int("n_photons", n_photons, 0, MAX_PHOTONS)
     chunk = check_int("chunk", chunk, 1, 2**24)
     seed = check_int("seed", seed, 0, 2**32 - 1)
-    intensity = check_real("intensity", intensity, 0)
-    eta = check_eta(eta)
-    sigma_t = check_real("sigma_t", sigma_t, 0)
+    intensity = check_fits("intensity", check_real("intensity", intensity, 0), mesh.dtype)
+    eta = check_fits("eta", check_eta(eta), mesh.dtype)
+    sigma_t = check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), mesh.dtype)
     if progress is not None and not callable(progress):
         raise ValueError(f"progress must be None or a callable progress(done, total), got {progress!r}")
     L_np = check_points("L", L, mesh.dtype)

@@ -90,11 +90,12 @@ def test_ray_differential_D_equals_autodiff_jacobian_determinant(seed, spread, e
 def test_only_the_consistent_sign_readings_match_autodiff():
     """Which signs of eq. 28-31 are right, measured against the exact trace (float64).
 
-    Right: the true derivative (minus eq. 28 as printed, `-eta` in eq. 31), and its global
+    Right: the true derivative (minus eq. 28 as printed, `-eta` in eq. 31; MATH.md §6 and
+    the package), and its global
     negation (eq. 28 and eq. 31 as printed, `w_P'.n_s` negated in eq. 30), which flips L'
     and keeps D. Wrong, with the median / max relative error they give on these paths
     (seed 41, spread 0.3; on flat triangles in brackets):
-    eq. 28 as printed + eq. 31 with -eta (MATH.md's reading) 0.70 / 1.6e3 [0.66 / 11];
+    eq. 28 as printed + eq. 31 with -eta (M' flipped alone) 0.70 / 1.6e3 [0.66 / 11];
     eq. 28 and 31 as extracted 0.15 / 82 [0.16 / 2.7]; true M' with +eta 0.74 / 1.4e3
     [0.75 / 9.9]; n_s' dropped 0.15 / 1.3e3 [exact: n_s' = 0 on flat triangles];
     mu' negated 0.15 / 1.4e2 [0.16 / 2.7].
@@ -186,6 +187,26 @@ def test_D_is_squared_path_length_when_eta_is_one(dtype, seed):
             assert np.max(_rel(autodiff_D(*args, 1.0), exact)[valid]) < bound
 
 
+def test_flipping_M_prime_alone_gives_d_P_minus_d_L_squared_at_eta_one():
+    """MATH.md §6: `M'` flipped without `w_P'` (eq. 28 as printed, `-eta` in eq. 31) gives
+    `(d_P - d_L)^2` at `eta = 1` on a flat surface, not `(d_P + d_L)^2`.
+
+    At `eta = 1`, `mu = mu' = 0` and `w_L' = -w_P'`, so `L' = (+-d_P - d_L) w_P'`: the
+    sign of `M'` decides between the sum and the difference of the path lengths.
+    """
+    p = planted_paths(43, BATCH, eta=1.0, normal_spread=0.0)
+    args = (p.V, _geometric_normals(p.V), p.P, p.L, p.ab)
+    d_P = np.linalg.norm(p.P - p.M, axis=-1)
+    d_L = np.linalg.norm(p.L - p.M, axis=-1)
+    scale = (d_P + d_L) ** 2  # (d_P - d_L)^2 can vanish; relative to the sum
+    flipped = _D_reference(*args, 1.0, m_sign=1)[0]
+    true = _D_reference(*args, 1.0)[0]
+    assert np.max(np.abs(flipped - (d_P - d_L) ** 2) / scale) < 1e-12  # measured 7.1e-16
+    assert np.max(np.abs(true - (d_P + d_L) ** 2) / scale) < 1e-12  # measured 1.7e-15
+    # the two differ by 4 d_P d_L: at least 0.155 of the scale on these paths
+    assert np.min(np.abs(flipped - true) / scale) > 0.1
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 @given(seed=st.integers(0, 2**32 - 1), eta=st.sampled_from([1.333, 1.5]))
 def test_D_at_normal_incidence_on_a_flat_surface_is_d_P_plus_eta_d_L_squared(dtype, seed, eta):
@@ -261,3 +282,17 @@ def test_batch_dimensions_and_per_lane_eta_broadcast():
     assert np.all(np.asarray(valid))
     assert np.max(_rel(D, ref)) < 1e-10
     assert np.max(_rel(D_ad, ref)) < 1e-10
+
+
+def test_an_overflowing_D_is_marked_invalid_and_zero():
+    """float32, a unit triangle scaled by `s`: `D` follows `s^2 D(1)` to rounding up to
+    s = 3e8 (the edge of `arguments.scale_range`); at 1e9 and 1e19 an intermediate
+    overflows (D came out inf, or 0, with valid True before): now valid is False and D 0."""
+    V = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    N = np.tile(np.float32([0, 0, 1]), (3, 1))
+    P, L, ab = np.float32([0.2, 0.3, -1]), np.float32([0.4, 0.2, 3]), np.float32([0.3, 0.3])
+    D1 = float(ray_differential_D(V, N, P, L, ab, 1.333)[0])
+    s = np.float32([1e3, 3e8, 1e9, 1e19])[:, None]
+    D, ok = (np.asarray(x) for x in ray_differential_D(V * s[:, None], N, P * s, L * s, ab, 1.333))
+    np.testing.assert_allclose(D[:2] / (D1 * s[:2, 0].astype(float) ** 2), 1, rtol=5e-7)
+    assert ok[:2].all() and not ok[2:].any() and np.all(D[2:] == 0)
