@@ -199,3 +199,20 @@ def test_walk_turns_back_when_the_first_direction_fails():
     chunked = solve(sc.surface, P, L, scheduler="chunked")
     for name in ("status", "point", "iterations", "crossed"):
         np.testing.assert_array_equal(np.asarray(getattr(sol, name)), np.asarray(getattr(chunked, name)))
+
+
+@pytest.mark.parametrize("depth", [0.1, 0.01])
+def test_a_shallow_receiver_finds_the_root_on_an_arc_that_turns_backward(depth):
+    """Receivers 0.1 m and 0.01 m under a flat pool, general path: from `M0` one exit of the
+    first triangle reads BACKWARD (the refracted ray points away from L, f -0.99) with the
+    root between it and the near point (f +0.21). That exit used to end the arc like no
+    bracket at all: the walk went the other way into TIR, turned back without a search,
+    and walked off the mesh (29 of 32 lanes found at 0.1 m). BACKWARD now opens the onset
+    search TIR opens: every lane is found, at the exhaustive reference's point."""
+    sc = scenes.flat_pool(512, n_receivers=4, dtype="float64")
+    L = np.asarray(sc.lights.position)[0]
+    P = np.column_stack([np.random.default_rng(1).uniform(-1.5, 1.5, (32, 2)), np.full(32, -depth)])
+    walk = solve(sc.surface, P, L, features=None)
+    ref = solve(sc.surface, P, L, method="exhaustive")
+    assert np.asarray(ref.found).all() and np.asarray(walk.found).all(), walk.summary()
+    np.testing.assert_allclose(np.asarray(walk.point), np.asarray(ref.point), atol=1e-9)

@@ -20,7 +20,7 @@ const int CJ_WALK = 0, CJ_BISECT = 1, CJ_DONE = 2;
 // Status codes (the manifest's status table) and ObjectiveStatus codes.
 const uint CJ_FOUND = 0u, CJ_NO_CROSSING = 1u, CJ_S_TIR = 2u, CJ_LEFT_MESH = 3u, CJ_MAX_STEPS = 4u,
            CJ_UNRESOLVED_ELLIPSE = 5u, CJ_DEGENERATE = 6u, CJ_LOST_CURVE = 7u, CJ_NOT_CONVERGED = 8u;
-const uint CJ_OK = 0u, CJ_TIR = 1u, CJ_DEG = 2u;
+const uint CJ_OK = 0u, CJ_TIR = 1u, CJ_DEG = 2u, CJ_BACKWARD = 3u;
 const float CJ_DELTA0 = 1.1920929e-03;  // 1e4 eps: the near points' offset from M0
 
 struct WalkState {
@@ -103,9 +103,11 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     WalkState s;
     bool bracket = is_ellipse ? ellipse_bracket : (br_p || br_m);
     bool use_m = use_m_bracket || (!(br_p || br_m) && walk_m);
-    // No sign change, and the arc of the walk direction runs into TIR: search it towards the
-    // onset first; without a root there the walk goes on (tir_end = 2).
-    bool tir_arc = walk_m ? (dm.ok && st_nm == CJ_OK && stm == CJ_TIR) : (dp.ok && st_np == CJ_OK && stp == CJ_TIR);
+    // No sign change, and the arc of the walk direction runs into TIR (or BACKWARD, walk.py's
+    // _first_triangle): search it towards the onset first; without a root there the walk
+    // goes on (tir_end = 2).
+    bool lost_m = stm == CJ_TIR || stm == CJ_BACKWARD, lost_p = stp == CJ_TIR || stp == CJ_BACKWARD;
+    bool tir_arc = walk_m ? (dm.ok && st_nm == CJ_OK && lost_m) : (dp.ok && st_np == CJ_OK && lost_p);
     bool search = !is_ellipse && !(br_p || br_m) && tir_arc;
     s.tau = is_ellipse ? tau_e : (use_m ? dm.tau : dp.tau);
     s.perp = is_ellipse ? perp_e : (use_m ? dm.perp : dp.perp);
@@ -347,7 +349,7 @@ WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool
     cj_objective(fr, P, L, p, eta, fm, stm, gm);
     bool transmits = stm == CJ_OK;
     bool searching = s.tir_end != 0;
-    bool tir_mid = searching && stm == CJ_TIR;
+    bool tir_mid = searching && (stm == CJ_TIR || stm == CJ_BACKWARD);  // BACKWARD: past the onset too
     ok = ok && (transmits || tir_mid);
     bool to_hi = cj_opposite(fm, s.f_lo);  // the root lies between lo and p: p is the new hi
     // TIR search: p replaces the TIR end when it reflects too, or when f changed sign against

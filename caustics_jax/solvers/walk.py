@@ -245,10 +245,15 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
     walk_m = okm & (~okp | prefer_m)
     TIR, DEG = ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, ObjectiveStatus.DEGENERATE
     at_m0 = (jnp.abs(f0) <= tol) & (st0 == OK)  # M0 itself is a solution
+    # An exit whose refracted ray points away from L (BACKWARD, past 90 degrees from w_L)
+    # ends an arc like TIR does: f is no bracket end there, but the root can lie between
+    # the near point and the onset (a receiver 0.1 m under a flat surface: f 0.21 at the
+    # near point, -0.99 BACKWARD at the exit, the solution 0.017 m from M0 on that arc).
+    lost = lambda st: (st == TIR) | (st == ObjectiveStatus.BACKWARD)  # noqa: E731
     flags = dict(
         found=found, is_ellipse=~okp & ~okm, br_p=br_p, br_m=br_m, use_m_bracket=use_m_bracket, walk_m=walk_m,
-        # The arc of each direction runs into TIR from a transmitting near point.
-        tir_arc_p=okp & (st_all[3] == OK) & (stp == TIR), tir_arc_m=okm & (st_all[4] == OK) & (stm == TIR),
+        # The arc of each direction runs into TIR (or BACKWARD) from a transmitting near point.
+        tir_arc_p=okp & (st_all[3] == OK) & lost(stp), tir_arc_m=okm & (st_all[4] == OK) & lost(stm),
         degenerate_exit_p=stp == DEG, degenerate_exit_m=stm == DEG, at_m0=at_m0,
         # A singular conic at a solution M0 does not matter (P, L and the normal aligned
         # on a flat surface make every point of the plane "coplanar"): M0 stays FOUND.
@@ -472,7 +477,8 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
 def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _State:
     transmits = stm == ObjectiveStatus.OK
     searching = s.tir_end != 0
-    tir_mid = searching & (stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
+    # In a search a BACKWARD cut sits on the far side of the onset, as a TIR one does.
+    tir_mid = searching & ((stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION) | (stm == ObjectiveStatus.BACKWARD))
     ok = ok & (transmits | tir_mid)
     to_hi = opposite(fm, s.f_lo)  # the root lies between lo and p: p becomes the new hi
     # TIR search (`_walk_update`): p replaces the TIR end when it reflects too, or when f
