@@ -216,3 +216,18 @@ def test_a_shallow_receiver_finds_the_root_on_an_arc_that_turns_backward(depth):
     ref = solve(sc.surface, P, L, method="exhaustive")
     assert np.asarray(ref.found).all() and np.asarray(walk.found).all(), walk.summary()
     np.testing.assert_allclose(np.asarray(walk.point), np.asarray(ref.point), atol=1e-9)
+
+
+def test_a_shallow_receiver_under_a_wave_finds_the_root_on_a_crossing_into_backward():
+    """256 receivers 0.1 m under a gentle wave: lane 8 crosses into the face holding its
+    root with f 0.007 at the entry and -0.99 BACKWARD at the exit; lane 254 meets the same
+    in its first triangle. The crossing used to walk on through BACKWARD (254 of 256
+    found; Newton and the exhaustive reference: 256). Such an arc is now searched as an
+    arc into TIR, and without a root the walk goes on as before."""
+    sc = scenes.wavy_pool(2048, n_receivers=16, depth=0.1, amplitude=0.03, dtype="float64", receiver_jitter=0.5)
+    P, L = np.asarray(sc.receivers), np.asarray(sc.lights.endpoint(sc.receivers))
+    walk = solve(sc.surface, P, L)
+    assert np.asarray(walk.found).all(), walk.summary()
+    lanes = [8, 254]
+    ref = solve(sc.surface, P[lanes], L[lanes], method="exhaustive")
+    np.testing.assert_allclose(np.asarray(walk.point)[lanes], np.asarray(ref.point), atol=1e-9)

@@ -283,7 +283,9 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     bool lost = !ok || side == 0.0;
     // An arc from a transmitting point to a totally reflecting one (or back) may hold a root
     // between the transmitting end and the onset of TIR: search it towards the onset.
-    int tir_end = (ok && e_ok && stx == CJ_TIR) ? 1 : ((ok && st_e == CJ_TIR && x_ok) ? -1 : 0);
+    // Into BACKWARD: the same search, and the walk goes on without a root (2; walk.py).
+    int tir_end = (ok && e_ok && stx == CJ_TIR) ? 1 : ((ok && e_ok && stx == CJ_BACKWARD) ? 2
+                  : ((ok && (st_e == CJ_TIR || st_e == CJ_BACKWARD) && x_ok) ? -1 : 0));
 
     s.mode = (bracket || tir_end != 0) ? CJ_BISECT : CJ_WALK;
     if (lost) { s.mode = CJ_DONE; s.status = CJ_LOST_CURVE; }

@@ -414,8 +414,13 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     # it towards the onset (`_bisect_update`) as the exhaustive reference does. Without a
     # root there, a walk into TIR ends (no root ahead on this branch); a walk out of it
     # goes on (inside TIR f is undefined).
-    TIR = ObjectiveStatus.TOTAL_INTERNAL_REFLECTION
-    tir_end = jnp.where(ok & e_ok & (stx == TIR), 1, jnp.where(ok & (st_e == TIR) & x_ok, -1, 0))
+    TIR, BACKWARD = ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, ObjectiveStatus.BACKWARD
+    # An arc into BACKWARD (the refracted ray turns away from L) is searched the same way
+    # (a receiver 0.1 m under a wave: f 0.007 at the entry, -0.99 BACKWARD at the exit, the
+    # root between); without a root there the walk goes on (2), as it always did through
+    # BACKWARD stretches.
+    tir_end = jnp.where(ok & e_ok & (stx == TIR), 1, jnp.where(ok & e_ok & (stx == BACKWARD), 2, jnp.where(
+        ok & ((st_e == TIR) | (st_e == BACKWARD)) & x_ok, -1, 0)))
 
     status, mode = s.status, jnp.where(bracket | (tir_end != 0), BISECT, WALK)
     for cond, code in ((lost, Status.LOST_CURVE),
