@@ -34,7 +34,7 @@ import numpy as np
 
 from . import scenes
 from ._precision import precision
-from .arguments import check_bool, check_eta, check_fits, check_int
+from .arguments import check_bool, check_eta, check_fits, check_int, check_scene_scale
 from .progress import progress
 from .reporting import log, stats
 from .scenes import MAX_TRIANGLES
@@ -360,6 +360,8 @@ def run(cfg: CompareConfig) -> dict:
     cfg.validate()
     with precision("float64"):
         sc64, ref_mesh, P, L = scene_arrays(cfg)
+        for dtype in cfg.dtypes:  # every dtype's scale band, before anything runs (a mesh file)
+            check_scene_scale(np.asarray(sc64.surface.vertices), (P, L), np.dtype(dtype))
         n_cross = int(np.asarray(start_points(sc64.surface, P, L)[2]).sum())
         ref = reference(cfg, sc64, P, L)
     results, sweeps = [], []

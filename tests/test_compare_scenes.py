@@ -96,3 +96,13 @@ def test_compile_time_is_marked_cached_only_when_nothing_was_compiled(events, ca
 
     _, compile_s, steady, got = compare._timed(fn, repeats=2)
     assert got is cached and len(calls) == 3 and compile_s >= 0 and steady >= 0
+
+
+def test_a_mesh_file_outside_the_scale_band_is_a_user_error_before_the_run(tmp_path, capsys):
+    """A pool 4e10 m wide in float32 (beyond `arguments.scale_range`): compare had logged
+    "skipped" per config and printed an empty table with exit status 0."""
+    _ripple_obj(tmp_path / "huge.obj", size=4e10)
+    rc = cli.main(["compare", "--scene", str(tmp_path / "huge.obj"), "--n", "4", "--dtype", "float32",
+                   "--configs", "walk", "--ref-n", "0", "--no-sweep", "--repeats", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "beyond what float32 resolves" in err[0], err

@@ -375,6 +375,41 @@ def test_values_the_mesh_dtype_cannot_hold_or_resolve_are_refused(pool, no_jit_w
             cj.solve(mesh, P, L, **solve_kwargs)
 
 
+def test_exhaustive_on_float32_names_the_dtype_not_its_tolerance(pool, no_jit_work):
+    """The exhaustive reference's float64 tolerance (1e-9) is below float32's epsilon: the
+    dtype is the problem, and the message says so (the tol check had answered first)."""
+    mesh, P, L = pool
+    for call in (lambda: cj.solve(mesh, P, L, method="exhaustive"), lambda: cj.solve(mesh, P[:0], L[:0],
+                 method="exhaustive"),
+                 lambda: cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0, 0, 1], method="exhaustive",
+                                       all_paths=True)):
+        with pytest.raises(ValueError, match="float64 reference"):
+            call()
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(method=cj.Walk(), all_paths=True), "a Walk object returns one path"),
+    (dict(method="walk", all_paths=True, solutions="all"), "leave solutions out"),
+])
+def test_all_paths_refuses_a_single_path_object_and_a_second_solutions(pool, no_jit_work, kwargs, match):
+    mesh, P, L = pool
+    with pytest.raises(ValueError, match=match):
+        cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0, 0, 1], **kwargs)
+
+
+def test_every_path_on_a_scaled_float32_pool_counts_each_path_once(pool):
+    """`Trace`'s default dedupe radius follows the mesh's largest coordinate: on the pool
+    scaled by 1e3 a fixed 1e-4 m had kept float32 duplicates 1.7e-4 m apart (irradiance
+    with all_paths twice the single path on 8 of 16 lanes)."""
+    mesh, P, L = pool
+    V, F, N = (np.asarray(x, np.float64) for x in (mesh.vertices, mesh.faces, mesh.normals))
+    s = 1e3
+    big = cj.SurfaceMesh.from_arrays(V * s, F.astype(int), N, dtype="float32")
+    res = cj.solve(big, P * s, L * s, solutions="all")
+    unit = cj.solve(mesh, P, L, solutions="all")
+    np.testing.assert_array_equal(np.asarray(res.count), np.asarray(unit.count))
+
+
 def test_a_float32_tol_at_its_epsilon_is_accepted():
     arguments.check_tol_resolves("tol", float(np.finfo(np.float32).eps), np.float32)
     arguments.check_tol_resolves("tol", 1e-12, np.float64)

@@ -165,6 +165,8 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
     P, L = check_lanes(prep.mesh, P, L)
     n, dtype = P.shape[0], prep.dtype
     eta = check_fits("eta", check_eta(eta), dtype)
+    if isinstance(solver, Exhaustive) and dtype != jnp.float64:  # before its float64 tol is judged
+        raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
     check_tol_resolves("tol", getattr(solver, "tol", None), dtype)
     check_features(features)
     start = check_start(start, n, dtype, prep.mesh.faces.shape[0])

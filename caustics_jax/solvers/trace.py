@@ -85,8 +85,10 @@ class Trace(SolverOptions):
     iters: bisection steps per isolated root, in `[1, 200]`.
     max_depth: Bernstein halvings before an undecided interval becomes one candidate, in
         `[8, 60]` (at most 24 are useful in float32).
-    dedupe: two roots closer than this (m) are one solution, `>= 0` (default 1e-7 m in
-        float64, 1e-4 m in float32).
+    dedupe: two roots closer than this (m) are one solution, `>= 0` (default relative to
+        the mesh's largest coordinate `R`, as rounding is: `1e-7 max(1, R / 2)` m in
+        float64, `1e-4 max(1, R / 2)` m in float32; the 4 m pools have `R` about 2. A fixed
+        1e-4 m counted float32 duplicates 1.7e-4 m apart twice on the pool scaled by 1e3).
     chunk: rows per jitted batch of root refinement, in `[1, 2^20]`.
     """
 
@@ -112,10 +114,11 @@ class Trace(SolverOptions):
             object.__setattr__(self, "dedupe", check_real("dedupe", self.dedupe, 0.0))
         object.__setattr__(self, "chunk", check_int("chunk", self.chunk, 1, 2**20))
 
-    def dedupe_radius(self, dtype) -> float:
+    def dedupe_radius(self, dtype, extent: float = 2.0) -> float:
+        """`dedupe`, or its default for a mesh whose largest coordinate is `extent` (m)."""
         if self.dedupe is not None:
             return self.dedupe
-        return 1e-7 if jnp.dtype(dtype) == jnp.float64 else 1e-4
+        return (1e-7 if jnp.dtype(dtype) == jnp.float64 else 1e-4) * max(1.0, extent / 2)
 
 
 # --------------------------------------------------------------------------- the trace
@@ -324,7 +327,9 @@ def solve_trace(mesh, P, L, eta, start, options: Trace, padded) -> ExhaustiveSol
                                              refine_opts)
         ok = (np.abs(f) <= tol) & (st == ObjectiveStatus.OK)
         owner, pts, tris, abs_, res = lanes_rows[row[ok]], M[ok], faces_rows[row[ok]], ab[ok], f[ok]
-    result = assemble(mesh, P, L, eta, start, tol, options.dedupe_radius(dtype), owner, pts, tris, abs_, res)
+    extent = float(np.max(np.abs(np.asarray(mesh.vertices)), initial=0.0))
+    result = assemble(mesh, P, L, eta, start, tol, options.dedupe_radius(dtype, extent), owner, pts, tris, abs_,
+                      res)
     has = result.count > 0
     final = np.where(has, Status.FOUND, np.where(status >= 0, status, np.asarray(result.solution.status)))
     sol = dataclasses.replace(result.solution, status=jnp.asarray(final.astype(np.int32)),

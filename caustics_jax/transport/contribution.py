@@ -91,7 +91,9 @@ def _lane_count(P: np.ndarray, L: np.ndarray) -> int:
     return shape[0]
 
 
-def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
+def check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
+    """`(n, 3)` unit receiver normals from `(3,)` or `(n, 3)` finite, non-zero input of any
+    length (host, float64; shared by `irradiance` and the SMS estimators)."""
     n_P = real_array("receiver_normal", receiver_normal)
     if n_P.shape[-1:] != (3,):
         raise ValueError(f"receiver_normal must have shape (3,) or (N, 3), got {n_P.shape}")
@@ -107,6 +109,15 @@ def _check_receiver_normal(receiver_normal, n: int) -> np.ndarray:
         raise ValueError("receiver_normal must be finite and non-zero")
     n_P = n_P / big
     return n_P / np.linalg.norm(n_P, axis=-1, keepdims=True)
+
+
+def check_intensity(intensity) -> np.ndarray:
+    """Radiant intensity (W/sr): real, finite, `>= 0`, scalar or per lane (host, float64;
+    the caller checks its shape against the lanes and `check_fits` against its dtype)."""
+    intensity_np = real_array("intensity", intensity)
+    if not np.all(np.isfinite(intensity_np)) or np.any(intensity_np < 0):
+        raise ValueError(f"intensity must be finite and >= 0 (W/sr), got {intensity!r}")
+    return intensity_np
 
 
 def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: float = 1.333, receiver_normal,
@@ -142,15 +153,16 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     `(E, Solution)` with `return_solution`). Per path: `path_irradiance` (module
     docstring). Bad input raises `ValueError` before any solve.
     """
-    intensity_np = real_array("intensity", intensity)
-    if not np.all(np.isfinite(intensity_np)) or np.any(intensity_np < 0):
-        raise ValueError(f"intensity must be finite and >= 0 (W/sr), got {intensity!r}")
+    intensity_np = check_intensity(intensity)
     sigma_t = check_real("sigma_t", sigma_t, 0)
     all_paths, return_solution = check_bool("all_paths", all_paths), check_bool("return_solution", return_solution)
     check_features(features)
     if all_paths and not (method in ("exhaustive", "walk", "trace") or isinstance(method, Exhaustive | Trace)):
         raise ValueError("all_paths=True sums every solution: it needs method='exhaustive' (every path "
-                         "on the mesh) or 'walk' (every path on the traced curve)")
+                         "on the mesh), 'walk' or 'trace' (every path on the traced curve), or a Trace(...) or "
+                         f"Exhaustive(...) object (a Walk object returns one path: use Trace(...)), got {method!r}")
+    if all_paths and "solutions" in options:
+        raise ValueError("all_paths=True sets solutions='all' itself: leave solutions out")
     if not isinstance(visibility, bool | np.bool_):
         raise ValueError(f"visibility must be True or False, got {visibility!r}")
     # A solver that returns every path per receiver (`Trace`, `Exhaustive(return_all=True)`,
@@ -163,7 +175,7 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     check_fits("intensity", intensity_np, dtype)
     check_fits("sigma_t", sigma_t, dtype)
     n = _lane_count(check_points("P", P, dtype), check_points("L", L, dtype))
-    n_P = _check_receiver_normal(receiver_normal, n)
+    n_P = check_receiver_normal(receiver_normal, n)
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
     if all_paths:

@@ -37,13 +37,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arguments import check_eta, check_fits, check_points, check_real, check_scene_scale
 from ..lanes import lanes_per_block
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
 from ..prepared import PreparedSurface, prepare
 from ..solvers import solve
 from ..start_points import StartPoint
-from .contribution import path_irradiance
+from .contribution import check_intensity, check_receiver_normal, path_irradiance
 
 
 class EstimatorResult(NamedTuple):
@@ -99,18 +100,24 @@ def _path_irradiance(mesh, face, ab, P, L, eta, intensity, n_P, sigma_t):
     return np.asarray(E, np.float64)
 
 
-def _inputs(mesh, P, L, intensity, receiver_normal):
+def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
+    """The estimators' arguments, checked as `irradiance` checks them (docs/input_contract.md)."""
     prep = prepare(mesh)
     dtype = prep.dtype
-    P = jnp.asarray(np.asarray(P), dtype).reshape(-1, 3)
-    L = jnp.broadcast_to(jnp.asarray(np.asarray(L), dtype).reshape(-1, 3), P.shape)
+    P_np, L_np = check_points("P", P, dtype), check_points("L", L, dtype)
+    check_scene_scale(np.asarray(prep.mesh.vertices), (P_np, L_np), dtype)
+    P = jnp.asarray(P_np, dtype).reshape(-1, 3)
+    L = jnp.broadcast_to(jnp.asarray(L_np, dtype).reshape(-1, 3), P.shape)
     n = P.shape[0]
-    n_P = np.broadcast_to(np.asarray(receiver_normal, np.float64), (n, 3))
-    if not np.all(np.isfinite(n_P)) or np.any(np.linalg.norm(n_P, axis=-1) == 0):
-        raise ValueError("receiver_normal must be finite and non-zero")
-    I_e = np.broadcast_to(np.asarray(intensity, np.float64), (n,))
-    if not np.all(np.isfinite(I_e)) or np.any(I_e < 0):
-        raise ValueError("intensity must be finite and >= 0")
+    n_P = check_receiver_normal(receiver_normal, n)
+    I_e = check_fits("intensity", check_intensity(intensity), dtype)
+    try:
+        I_e = np.broadcast_to(I_e, (n,))
+    except ValueError:
+        raise ValueError(f"intensity must be a scalar or shape ({n},), got {I_e.shape}") from None
+    check_fits("eta", check_eta(eta), dtype)
+    check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), dtype)
+    check_real("same_radius", same_radius, 0, lo_open=True)
     return prep, P, L, n, n_P, I_e
 
 
@@ -128,7 +135,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     `newton_options` go to
     `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...)."""
     k = _check_count("k", k, 1)
-    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal)
+    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
     lane = np.repeat(np.arange(n), k)
     idx = jnp.asarray(lane)
@@ -160,7 +167,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
     """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
     path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring)."""
     max_trials = _check_count("max_trials", max_trials, 1)
-    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal)
+    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
     found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton_options)
     solves = np.ones(n, np.int64)

@@ -77,6 +77,7 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     A_d = triangle_area(hit0, hit1, hit2)
     ok = A > 0
     sigma = jnp.sqrt(safe_div(A_d, A, ok)) * jnp.asarray(scale, A.dtype) ** level
+    ok = ok & jnp.isfinite(sigma)  # areas overflow beyond arguments.scale_range (float32 1e10 m): invalid
     return jnp.where(ok, sigma, 0), ok
 
 
@@ -123,7 +124,9 @@ def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir
         ok = ok & hit
     A = triangle_area(x00, x10, x01)
     ok = ok & (A > 0)
-    return jnp.where(ok, safe_div(triangle_area(*hits), A, ok), 0), ok
+    ratio = safe_div(triangle_area(*hits), A, ok)
+    ok = ok & jnp.isfinite(ratio)  # as in _compression_ratio
+    return jnp.where(ok, ratio, 0), ok
 
 
 @float_inputs("x00", "x10", "x01", "n00", "n10", "n01", "l_dir", "receiver_point",

@@ -94,6 +94,13 @@ def test_biased_sms_never_exceeds_the_total_and_reaches_it_with_many_starts():
         (sms_biased, dict(k=0, seed=0), "k must"),
         (sms_unbiased, dict(seed=0, max_trials=0), "max_trials"),
         (sms_unbiased, dict(seed=0, receiver_normal=[0.0, 0.0, 0.0]), "receiver_normal"),
+        # checked as irradiance checks them (they had given E = 0, inf, or an amplified E)
+        (sms_biased, dict(k=2, seed=0, receiver_normal=[0.0, 1.0]), "receiver_normal must have shape"),
+        (sms_biased, dict(k=2, seed=0, sigma_t=-1.0), "sigma_t"),
+        (sms_biased, dict(k=2, seed=0, sigma_t=float("nan")), "sigma_t"),
+        (sms_unbiased, dict(seed=0, intensity=1e39), "intensity overflows float32"),
+        (sms_unbiased, dict(seed=0, eta=1e39), "eta overflows float32"),
+        (sms_biased, dict(k=2, seed=0, same_radius=-1.0), "same_radius"),
     ],
 )
 def test_bad_estimator_arguments_raise_value_error(fn, kwargs, match):
@@ -101,3 +108,16 @@ def test_bad_estimator_arguments_raise_value_error(fn, kwargs, match):
     kwargs = {"intensity": 1.0, "receiver_normal": UP, **kwargs}
     with pytest.raises(ValueError, match=match):
         fn(mesh, np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]]), **kwargs)
+
+
+def test_estimators_take_a_receiver_normal_of_any_length():
+    """As `irradiance`: normalised on the host in float64 (float32 `[0, 0, 1e20]` and
+    `[0, 0, 1e-25]` had given E = 0)."""
+    sc = scenes.wavy_pool(512, n_receivers=2, dtype="float32")
+    mesh, P = sc.surface, np.asarray(sc.receivers)
+    L = np.asarray(sc.lights.endpoint(sc.receivers))
+    E = [sms_biased(mesh, P, L, k=16, seed=3, intensity=1.0, receiver_normal=[0.0, 0.0, s]).irradiance
+         for s in (1.0, 1e20, 1e-25)]
+    assert np.asarray(E[0]).sum() > 0
+    np.testing.assert_array_equal(np.asarray(E[1]), np.asarray(E[0]))
+    np.testing.assert_array_equal(np.asarray(E[2]), np.asarray(E[0]))

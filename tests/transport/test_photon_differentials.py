@@ -147,3 +147,22 @@ def test_photon_differential_irradiance_matches_flat_interface_formula(dtype):
     assert ok.mean() > 0.99
     ref = flat_interface_irradiance(np.asarray(Y, np.float64)[ok], L, 0.0, 1.333, 2.0, 0.2)
     np.testing.assert_allclose(np.asarray(E, np.float64)[ok], ref, rtol=5e-6 if dtype == jnp.float32 else 1e-14)
+
+
+def test_compression_ratios_beyond_the_scale_band_are_invalid_not_nan():
+    """float32 positions scaled by 1e10 and more (beyond `arguments.scale_range`): the areas
+    overflow and sigma came out NaN with valid True; now valid False and sigma 0. At 1e3
+    the ratio is the unit-scale one (it is scale-free)."""
+    import caustics_jax as cj
+    z, x, y = np.float32([0, 0, 1]), np.float32([1, 0, 0]), np.float32([0, 1, 0])
+    rows = []
+    for s in (1.0, 1e3, 1e10, 1e19):
+        s = np.float32(s)
+        sig, ok = cj.compression_ratio(np.zeros(3, np.float32), x * s, y * s, z, z, z, -z, np.float32(2.0) * s)
+        ex, ok_ex = cj.compression_ratio_exact(np.zeros(3, np.float32), x * s, y * s, z, z, z, -z,
+                                               np.float32([0, 0, -2]) * s, z)
+        rows.append((float(sig), bool(ok), float(ex), bool(ok_ex)))
+    assert rows[0][1] and rows[0][3] and rows[1][1] and rows[1][3]
+    np.testing.assert_allclose([rows[1][0], rows[1][2]], [rows[0][0], rows[0][2]], rtol=1e-5)
+    for sig, ok, ex, ok_ex in rows[2:]:
+        assert (sig, ok, ex, ok_ex) == (0.0, False, 0.0, False)
