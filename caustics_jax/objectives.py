@@ -8,6 +8,7 @@ All take the triangle (`V`, `N`: vertex positions and normals, rows), the receiv
 from __future__ import annotations
 
 import enum
+import functools
 from typing import NamedTuple
 
 import jax
@@ -37,8 +38,8 @@ def path_vectors(V, N, P, L, ab):
     M = barycentric_point(V, ab)
     n_tilde = interpolated_normal(N, ab)
     PM, LM = P - M, L - M
-    bad = lambda x: ~((norm(x) > 0) & jnp.isfinite(norm(x)))  # noqa: E731
-    degenerate = bad(n_tilde) | bad(PM) | bad(LM)
+    lengths = [norm(x) for x in (n_tilde, PM, LM)]
+    degenerate = ~functools.reduce(jnp.logical_and, [(d > 0) & jnp.isfinite(d) for d in lengths])
     return M, safe_normalize(n_tilde), safe_normalize(PM), safe_normalize(LM), degenerate
 
 
