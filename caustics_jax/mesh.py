@@ -236,6 +236,40 @@ class SurfaceMesh(eqx.Module):
         idx = self.faces[jnp.maximum(jnp.asarray(face), 0)]
         return self.vertices[idx], self.normals[idx]
 
+    def translated(self, offset) -> SurfaceMesh:
+        """The same mesh moved by `offset` (`(3,)` metres): vertices `V + offset` added in
+        float64 and rounded once to the mesh's dtype, normals and adjacency unchanged, a
+        `grid` moved with it. Exact when `offset` is a multiple of every vertex
+        coordinate's spacing (`prepared.local_origin` picks such offsets)."""
+        offset = real_array("offset", offset)
+        if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+            raise ValueError(f"offset must be 3 finite real numbers, got {offset!r}")
+        V = np.asarray(self.vertices, np.float64) + offset
+        _check_fits(V, self.dtype)
+        grid = self.grid if self.grid is None else dataclasses.replace(
+            self.grid, x0=self.grid.x0 + float(offset[0]), y0=self.grid.y0 + float(offset[1]))
+        return dataclasses.replace(self, vertices=jnp.asarray(V, self.dtype), grid=grid)
+
+    def check_grid(self) -> None:
+        """A `ValueError` when `grid` no longer describes the vertices' xy (a mesh moved in x
+        or y with `eqx.tree_at` keeps its static `grid`; only heights may change). The
+        start points trust the grid's cells: a translated generator mesh had found no
+        start point on any lane, silently `NO_CROSSING`. Tolerance: 4 ulps of the
+        largest xy coordinate in the mesh's dtype, plus `_check_grid`'s 1e-9 spacing."""
+        if self.grid is None:
+            return
+        g = self.grid
+        xy = np.asarray(self.vertices, np.float64)[:, :2]
+        if len(xy) != (g.nx + 1) * (g.ny + 1):
+            raise ValueError(f"the mesh's vertices do not follow its GridInfo layout {g}")
+        want = g.vertex_xy()
+        tol = 4 * float(np.finfo(self.dtype).eps) * float(np.max(np.abs(want))) + 1e-9 * max(abs(g.dx), abs(g.dy))
+        off = np.flatnonzero(np.any(np.abs(xy - want) > tol, axis=-1))
+        if off.size:
+            raise ValueError(f"vertices {_name(off)} moved off the mesh's regular grid {g} (xy changed after it "
+                             "was built, e.g. with eqx.tree_at): rebuild it with SurfaceMesh.from_arrays (no "
+                             "grid) or SurfaceMesh.from_heightfield, or move it with mesh.translated(offset)")
+
     def astype(self, dtype) -> SurfaceMesh:
         """The same mesh with float fields in `dtype` (float32 or float64)."""
         dtype = check_float_dtype(dtype)

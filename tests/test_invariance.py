@@ -8,7 +8,7 @@ so jit compiles once per dtype (the mesh is a traced argument).
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import caustics_jax as cj
@@ -65,16 +65,17 @@ def base(dtype, which="pool"):
     return _BASE[key]
 
 
-def _assert_same_lanes(sol, ref, transform, dtype, scale=1.0):
-    """Statuses equal; found points equal to the transformed reference points."""
+def _assert_same_lanes(sol, ref, transform, dtype, scale=1.0, slack=0.0):
+    """Statuses equal; found points equal to the transformed reference points (to
+    `POS_TOL` of the scene size plus `slack` metres)."""
     st_a, st_b = np.asarray(sol.status), np.asarray(ref.status)
     diff = np.flatnonzero(st_a != st_b)
     assert diff.size == 0, f"statuses changed at lanes {diff[:10].tolist()}: {st_b[diff[:10]]} -> {st_a[diff[:10]]}"
     found = np.asarray(ref.found)
     M = np.asarray(sol.point, np.float64)[found]
     M_ref = transform(np.asarray(ref.point, np.float64)[found])
-    err = np.max(np.linalg.norm(M - M_ref, axis=-1), initial=0) / (4.2 * scale)
-    assert err <= POS_TOL[dtype], f"points moved by {err:.3g} of the scene size"
+    err = np.max(np.linalg.norm(M - M_ref, axis=-1), initial=0)
+    assert err <= POS_TOL[dtype] * 4.2 * scale + slack, f"points moved by {err / (4.2 * scale):.3g} of the scene size"
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
@@ -95,6 +96,26 @@ def test_translating_the_whole_scene_translates_the_solution(dtype, t):
     V, F, N, P, L = POOL
     sol = _solve(_moved(V, F, N, 1.0, t, dtype), P + t, L + t, dtype)
     _assert_same_lanes(sol, base(dtype), lambda M: M + t, dtype)
+
+
+# Far from the origin: solved where it lies, float32 found 45 of 256 lanes of this pool at
+# (300, -300, 0) m and 1 at 3 km (wrong TIR / LEFT_MESH / NOT_CONVERGED); `solve` now works
+# about the mesh's centre (`prepared.local_origin`). What is left is the rounding of the
+# moved vertices and of the returned point: measured max 1.25 (float32) and 1.42 (float64)
+# spacings of the largest coordinate over 12 offsets in 1e2..1e4 m; bound 4.
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@settings(max_examples=4)
+@given(log_d=st.floats(2, 4), angle=st.floats(0, 2 * np.pi), z=st.floats(-1, 1))
+@example(log_d=np.log10(300 * np.sqrt(2)), angle=-np.pi / 4, z=0.0)  # (300, -300, 0) m
+@example(log_d=3.5, angle=1.0, z=0.5)
+def test_a_scene_far_from_the_origin_is_solved_as_near_it(dtype, log_d, angle, z):
+    t = 10.0**log_d * np.array([np.cos(angle), np.sin(angle), z])
+    V, F, N, P, L = POOL
+    sol = _solve(_moved(V, F, N, 1.0, t, dtype), P + t, L + t, dtype)
+    spacing = float(np.spacing(np.asarray(np.max(np.abs(t)) + 4.2, dtype)))
+    _assert_same_lanes(sol, base(dtype), lambda M: M + t, dtype, slack=4 * spacing)
 
 
 def _rotation(q):

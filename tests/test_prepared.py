@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from caustics_jax import barycentric_point
+from caustics_jax import barycentric_point, solve
 from caustics_jax.bvh import FaceBVH
 from caustics_jax.face_cells import FaceCells
 from caustics_jax.mesh import SurfaceMesh
@@ -73,3 +73,101 @@ def test_a_mesh_changed_in_place_is_prepared_anew():
     moved = eqx.tree_at(lambda m: m.vertices, mesh, mesh.vertices.at[:, 0].add(0.5))
     assert prepare(moved).accel is not prepare(mesh).accel
     assert not np.array_equal(np.asarray(prepare(moved).accel.u_lines), np.asarray(prepare(mesh).accel.u_lines))
+
+
+# --------------------------------------------------------------------------- a far mesh
+# float32 keeps ~7 digits of a coordinate: solved where it lies, the 512-triangle pool moved
+# by (300, -300, 0) m found 45 of 256 lanes (TIR 55, LEFT_MESH 17, NOT_CONVERGED 139), 1 of
+# 256 at 3 km. `prepare` moves such a mesh near the origin (`local_origin`) and `solve` moves
+# the points back (tests/test_invariance.py checks the lanes).
+
+
+def test_a_mesh_near_the_origin_is_solved_where_it_is():
+    for mesh in (wavy_pool(512).surface, lagoon(512).surface, jittered_grid(512, 0.2)):
+        prep = prepare(mesh)
+        assert not np.any(prep.origin) and prep.local is prep  # lanes bit for bit as before
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_the_local_origin_moves_a_far_mesh_exactly(dtype):
+    base = np.asarray(wavy_pool(512, dtype="float64").surface.vertices, np.float64)
+    faces = np.asarray(wavy_pool(512).surface.faces)
+    rng = np.random.default_rng(0)
+    for _ in range(8):
+        t = rng.uniform(-1, 1, 3) * 10.0 ** rng.uniform(1, 5, 3)
+        mesh = SurfaceMesh.from_arrays(base + t, faces, dtype=dtype)
+        prep = prepare(mesh)
+        far = np.abs(t) > 4.2  # the axes whose centre lies beyond the pool's 4.2 m side
+        assert np.array_equal(prep.origin != 0, far), (t, prep.origin)
+        V, V_local = np.asarray(mesh.vertices, np.float64), np.asarray(prep.local.mesh.vertices, np.float64)
+        np.testing.assert_array_equal(V_local + prep.origin, V)  # exact: the same triangles
+        assert np.max(np.abs(V_local)) <= 1.5 * 4.2 + 1e-3  # an axis left alone: centre within one side
+        np.testing.assert_array_equal(np.asarray(prep.local.mesh.normals), np.asarray(mesh.normals))
+
+
+def test_a_grid_mesh_moves_with_its_grid_and_a_stale_grid_is_refused():
+    import equinox as eqx
+
+    sc = wavy_pool(512, dtype="float32")
+    P = np.asarray(sc.receivers)
+    L = np.broadcast_to(np.asarray(sc.lights.position[0]), P.shape)
+    t = np.array([300.0, -300.0, 20.0])
+    moved = sc.surface.translated(t)
+    assert moved.grid.x0 == sc.surface.grid.x0 + 300 and prepare(moved).accel.kind == "grid"
+    a, b = solve(moved, P + t, L + t), solve(sc.surface, P, L)
+    np.testing.assert_array_equal(np.asarray(a.status), np.asarray(b.status))
+    assert np.all(np.asarray(b.found))
+    # 0.5 ulp of 300 m in float32 is 1.5e-5 m: the moved vertices' rounding
+    err = np.abs(np.asarray(a.point, np.float64) - (np.asarray(b.point, np.float64) + t)).max()
+    assert err <= 2 * np.spacing(np.float32(300)), err
+    stale = eqx.tree_at(lambda m: m.vertices, sc.surface, sc.surface.vertices + jnp.asarray([1.0, 0, 0], "float32"))
+    with pytest.raises(ValueError, match="moved off the mesh's regular grid"):
+        solve(stale, P, L)  # had found no start point on any lane: NO_CROSSING, silently
+    heights = eqx.tree_at(lambda m: m.vertices, sc.surface, sc.surface.vertices.at[:, 2].add(0.01))
+    assert np.all(np.asarray(solve(heights, P, L).found))  # animated heights keep the grid
+
+
+def test_every_entry_point_answers_a_far_scene_in_the_callers_frame():
+    """irradiance (one path, every path, returned solutions), the exhaustive reference and
+    the photon map run about `prepare(mesh).origin` and answer where the scene lies:
+    points moved back (zeros kept where a lane has none), irradiance unchanged."""
+    import caustics_jax as cj
+
+    sc = wavy_pool(512, dtype="float64", n_receivers=6)
+    base = sc.surface
+    t = np.array([3000.0, -3000.0, 1500.0])
+    far = SurfaceMesh.from_arrays(np.asarray(base.vertices) + t, np.asarray(base.faces), np.asarray(base.normals))
+    assert np.any(prepare(far).origin)
+    P = np.array(sc.receivers, np.float64)
+    P[:4, 2] = 0.5  # above the water: no start point, zeros in the result
+    L = np.broadcast_to(np.asarray(sc.lights.position[0], np.float64), P.shape)
+    kw = dict(intensity=2.0, receiver_normal=(0, 0, 1), return_solution=True)
+
+    def same(a, b):  # a: the far scene's, b: the base scene's
+        np.testing.assert_array_equal(np.asarray(a.status), np.asarray(b.status))
+        for field in ("point", "start_point"):
+            x, y = np.asarray(getattr(a, field)), np.asarray(getattr(b, field))
+            has = np.any(y != 0, -1)
+            assert has.sum() >= len(P) - 4
+            np.testing.assert_array_equal(x[~has], 0)
+            np.testing.assert_allclose(x[has], y[has] + t, rtol=0, atol=4 * np.spacing(5000.0))
+
+    for extra in ({}, {"all_paths": True, "visibility": True}):
+        (E1, s1), (E0, s0) = cj.irradiance(far, P + t, L + t, **kw, **extra), cj.irradiance(base, P, L, **kw, **extra)
+        np.testing.assert_allclose(np.asarray(E1), np.asarray(E0), rtol=1e-11)
+        assert np.count_nonzero(np.asarray(E0)) >= len(P) - 4
+        same(s1, s0)
+    a, b = (cj.solve(m, P + s, L + s, method="exhaustive", return_all=True) for m, s in ((far, t), (base, 0)))
+    same(a.solution, b.solution)
+    has = np.asarray(b.all_triangles) >= 0
+    np.testing.assert_array_equal(np.asarray(a.all_triangles), np.asarray(b.all_triangles))
+    np.testing.assert_array_equal(a.all_points[~has], 0)
+    np.testing.assert_allclose(a.all_points[has], b.all_points[has] + t, rtol=0, atol=4 * np.spacing(5000.0))
+    grid = dict(x0=-1.0, x1=1.0, y0=-1.0, y1=1.0, nx=6, ny=6)
+    moved = dict(z=-1.0 + t[2], x0=-1.0 + t[0], x1=1.0 + t[0], y0=-1.0 + t[1], y1=1.0 + t[1], nx=6, ny=6)
+    light = np.asarray(sc.lights.position[0], np.float64)
+    p1 = cj.photon_irradiance(far, light + t, intensity=2.0, receiver=cj.ReceiverGrid(**moved), n_photons=1 << 14)
+    p0 = cj.photon_irradiance(base, light, intensity=2.0, receiver=cj.ReceiverGrid(z=-1.0, **grid), n_photons=1 << 14)
+    assert p0.hits.sum() > 1000
+    np.testing.assert_array_equal(p1.hits, p0.hits)
+    np.testing.assert_allclose(p1.irradiance, p0.irradiance, rtol=1e-9)

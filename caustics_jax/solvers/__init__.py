@@ -7,12 +7,12 @@ it is built; `solve(mesh, P, L, method="walk", **options)` is sugar for
 """
 
 from ._solution import Solution, Status
-from ._solve import METHODS, returns_every_path, solve
+from ._solve import METHODS, LocalSolve, returns_every_path, solve, solve_local
 from .exhaustive import Exhaustive, ExhaustiveSolution
 from .newton import Newton
 from .options import SolverOptions, default_tol
 from .trace import Trace
 from .walk import Walk
 
-__all__ = ["METHODS", "Exhaustive", "ExhaustiveSolution", "Newton", "Solution", "SolverOptions", "Status",
-           "Trace", "Walk", "default_tol", "returns_every_path", "solve"]
+__all__ = ["METHODS", "Exhaustive", "ExhaustiveSolution", "LocalSolve", "Newton", "Solution", "SolverOptions",
+           "Status", "Trace", "Walk", "default_tol", "returns_every_path", "solve", "solve_local"]

@@ -9,6 +9,7 @@ once in its constructor); `method="walk"` with keyword options is sugar for
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -29,6 +30,7 @@ from .flat import flat_root, flat_solution
 from .newton import Newton, solve_newton
 from .options import SolverOptions, check_eta
 from .sides import warn_if_wrong_sides
+from .solution_set import translated
 from .trace import Trace, solve_trace, with_solutions
 from .walk import Walk, solve_walk
 
@@ -51,8 +53,9 @@ def solver_from(method, options: dict) -> SolverOptions:
     return METHODS[method].from_kwargs(**options)
 
 
-def check_lanes(mesh: SurfaceMesh, P, L):
-    """`P`, `L` broadcast to `(N, 3)` in the mesh's dtype (see `check_points`)."""
+def check_lanes(mesh: SurfaceMesh, P, L, origin=None):
+    """`P`, `L` broadcast to `(N, 3)` in the mesh's dtype (see `check_points`), moved by
+    `-origin` (float64, before the cast) when given: `PreparedSurface.local`'s frame."""
     dtype = mesh.dtype
     P_np, L_np = (check_points(name, X, dtype) for name, X in (("P", P), ("L", L)))
     check_scene_scale(np.asarray(mesh.vertices), (P_np, L_np), dtype)
@@ -63,6 +66,8 @@ def check_lanes(mesh: SurfaceMesh, P, L):
         raise ValueError(f"P {P_np.shape} and L {L_np.shape} do not broadcast") from exc
     if P_np.ndim != 2:
         raise ValueError(f"P and L must broadcast to (N, 3), got {P_np.shape}")
+    if origin is not None and np.any(origin):
+        P_np, L_np = P_np - origin, L_np - origin
     # (cast and copied on the host: jnp.asarray of a numpy array compiles once per shape)
     return jax.device_put(P_np.astype(dtype)), jax.device_put(L_np.astype(dtype))
 
@@ -121,6 +126,30 @@ def empty_solution(n: int, dtype, status: Status = Status.NO_CROSSING) -> Soluti
     )
 
 
+class LocalSolve(NamedTuple):
+    """A solve in the frame of `prepare(mesh).local` (`solve_local`): what `irradiance`
+    sums there, and `solve` moves back with `to_global`.
+
+    Attributes:
+        result: the `Solution` (or `ExhaustiveSolution`), points in the local frame.
+        prep: the surface the solvers ran on (`prepare(mesh).local`).
+        P, L: `(N, 3)` receivers and lights in that frame, the mesh's dtype.
+        origin: `(3,)` float64 `prepare(mesh).origin` (zero near the origin).
+        has_start: `(N,)` lanes with a start point `M0` (`start_point` is zero elsewhere).
+    """
+
+    result: Solution | ExhaustiveSolution
+    prep: PreparedSurface
+    P: jax.Array
+    L: jax.Array
+    origin: np.ndarray
+    has_start: np.ndarray
+
+    def to_global(self) -> Solution | ExhaustiveSolution:
+        """`result` in the caller's frame (`solution_set.translated`)."""
+        return translated(self.result, self.origin, self.has_start)
+
+
 def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, method="walk", start=None,
           features="auto", **options) -> Solution:
     """Find refraction points `M` of paths `P -> M -> L` through the surface (seed 001 §3.4).
@@ -155,14 +184,32 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
     persistent compilation cache keeps the programs between processes
     (`caustics_jax.compilation`; `CAUSTICS_JAX_COMPILATION_CACHE=0` turns it off).
 
+    A mesh far from the coordinate origin is solved about its centre
+    (`prepared.local_origin`: `P`, `L` and the mesh moved by `-origin` in float64, exactly
+    for the mesh) and the points come back moved by `+origin`, rounded once: float32 keeps
+    the digits the triangles need (docs/input_contract.md "Scale").
+
     Returns a `Solution` (an `ExhaustiveSolution` for `Exhaustive(return_all=True)`);
     `status` holds `Status` codes and `found` is True exactly where a point with
     `|residual| <= tol` was returned. Bad input raises `ValueError` here, before any
     jitted work; zero lanes give an empty result.
     """
-    prep = prepare(mesh)
+    return solve_local(mesh, P, L, eta=eta, method=method, start=start, features=features, **options).to_global()
+
+
+def solve_local(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, method="walk", start=None,
+                features="auto", **options) -> LocalSolve:
+    """`solve` (same arguments and checks) without moving the result back: a `LocalSolve`
+    in the frame of `prepare(mesh).local`, for callers that go on computing there
+    (`irradiance`)."""
+    glob = prepare(mesh)
     solver = solver_from(*with_solutions(method, options))
-    P, L = check_lanes(prep.mesh, P, L)
+    P, L = check_lanes(glob.mesh, P, L, glob.origin)
+    prep = glob.local
+
+    def done(result, has_start):
+        return LocalSolve(result, prep, P, L, glob.origin, np.asarray(has_start, bool))
+
     n, dtype = P.shape[0], prep.dtype
     eta = check_fits("eta", check_eta(eta), dtype)
     if isinstance(solver, Exhaustive) and dtype != jnp.float64:  # before its float64 tol is judged
@@ -175,22 +222,22 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
             if dtype != jnp.float64:
                 raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
             sol = empty_solution(0, dtype, Status.NO_SOLUTION)
-            return ExhaustiveSolution.empty(sol) if solver.return_all else sol
+            return done(ExhaustiveSolution.empty(sol) if solver.return_all else sol, np.zeros(0, bool))
         start = start if start is not None else prep.start_points(P, L)
-        return solve_exhaustive(prep.mesh, P, L, eta, tuple(start), solver, padded=prep.padded)
+        return done(solve_exhaustive(prep.mesh, P, L, eta, tuple(start), solver, padded=prep.padded), start[2])
     if isinstance(solver, Trace):  # every solution on the traced curve (solvers/trace.py)
         if n == 0:
-            return ExhaustiveSolution.empty(empty_solution(0, dtype, Status.NO_SOLUTION))
+            return done(ExhaustiveSolution.empty(empty_solution(0, dtype, Status.NO_SOLUTION)), np.zeros(0, bool))
         start = start if start is not None else prep.start_points(P, L)
-        return solve_trace(prep.mesh, P, L, eta, tuple(start), solver, prep.padded)
+        return done(solve_trace(prep.mesh, P, L, eta, tuple(start), solver, prep.padded), start[2])
     if isinstance(solver, Newton):
         solver.check_dtype(dtype)
     if n == 0:
-        return empty_solution(0, dtype)
+        return done(empty_solution(0, dtype), np.zeros(0, bool))
     feats = prep.features if isinstance(features, str) else features
     sol = _solve_blocks(prep, P, L, eta, start, solver, None if feats == GENERAL else feats)
     warn_if_wrong_sides(prep, P, L, sol)  # mesh wound clockwise, or P and L swapped (solvers/sides.py)
-    return sol
+    return done(sol, np.asarray(sol.status) != Status.NO_CROSSING)
 
 
 # --------------------------------------------------------------------------- blocks of lanes
@@ -267,4 +314,4 @@ def _select_fields(mask, a: dict, b: dict) -> dict:
     return {k: jnp.where(mask.reshape(mask.shape + (1,) * (a[k].ndim - 1)), a[k], b[k]) for k in a}
 
 
-__all__ = ["METHODS", "empty_solution", "solve", "solver_from"]
+__all__ = ["METHODS", "LocalSolve", "empty_solution", "solve", "solve_local", "solver_from"]

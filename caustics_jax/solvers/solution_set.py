@@ -6,6 +6,7 @@ where it is itself a solution, deduplicate per lane, pad, and pick the one neare
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import NamedTuple
 
@@ -45,6 +46,30 @@ class ExhaustiveSolution(NamedTuple):
         n = solution.point.shape[0]
         return cls(solution, np.zeros((n, 1, 3)), np.full((n, 1), -1, np.int32), np.zeros(n, np.int32),
                    np.zeros((n, 1, 2)))
+
+
+def translated(result: Solution | ExhaustiveSolution, offset: np.ndarray, has_start) -> Solution | ExhaustiveSolution:
+    """`result` with its points moved by `offset` (`(3,)` float64; `solve` runs on
+    `prepared.local` and moves back by its `origin`): each point added in float64 and
+    rounded once to its dtype. Lanes without a point keep zeros: `point` where `triangle`
+    is -1, `start_point` where `has_start` (`(N,)`) is False, `all_points` where
+    `all_triangles` is -1. The same `result` where `offset` is zero."""
+    if not np.any(offset):
+        return result
+
+    def moved(X, keep):
+        X_np = np.asarray(X)
+        out = np.where(np.asarray(keep)[..., None], X_np.astype(np.float64) + offset, X_np)
+        return out.astype(X_np.dtype)
+
+    def solution(sol: Solution) -> Solution:
+        return dataclasses.replace(sol, point=jnp.asarray(moved(sol.point, np.asarray(sol.triangle) >= 0)),
+                                   start_point=jnp.asarray(moved(sol.start_point, has_start)))
+
+    if isinstance(result, ExhaustiveSolution):
+        return result._replace(solution=solution(result.solution),
+                               all_points=moved(result.all_points, np.asarray(result.all_triangles) >= 0))
+    return solution(result)
 
 
 @functools.partial(jax.jit, static_argnames=("iters",))

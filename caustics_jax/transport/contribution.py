@@ -28,6 +28,8 @@ On a flat interface at normal incidence it reduces to MATH.md §6's paraxial
 
 from __future__ import annotations
 
+from typing import cast
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -42,7 +44,7 @@ from ..lanes import compact_index, scatter_lanes
 from ..mesh import SurfaceMesh
 from ..objectives import path_vectors
 from ..prepared import PreparedSurface, prepare
-from ..solvers import Exhaustive, Trace, returns_every_path, solve
+from ..solvers import Exhaustive, ExhaustiveSolution, Solution, Trace, returns_every_path, solve_local
 from .differentials import ray_differential_D
 from .visibility import path_visible
 
@@ -171,21 +173,23 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
         raise ValueError(f"method {method!r} with options {options} returns every path per receiver: pass "
                          "all_paths=True to sum them")
     prep = prepare(mesh)
-    mesh, dtype = prep.mesh, prep.dtype
+    dtype = prep.dtype
     check_fits("intensity", intensity_np, dtype)
     check_fits("sigma_t", sigma_t, dtype)
     n = _lane_count(check_points("P", P, dtype), check_points("L", L, dtype))
     n_P = check_receiver_normal(receiver_normal, n)
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
+    # Solved and summed in the frame of `prep.local` (a far mesh moved near the origin,
+    # `prepared.local_origin`); only a returned Solution moves back.
     if all_paths:
-        res = solve(mesh, P, L, eta=eta, method=method, solutions="all", **options)
-        E = _sum_all_paths(mesh, res, P, L, eta, intensity_np, n_P, sigma_t, visibility)
-        return (E, res.solution) if return_solution else E
+        ls = solve_local(prep, P, L, eta=eta, method=method, solutions="all", **options)
+        res = cast(ExhaustiveSolution, ls.result)  # every path per receiver
+        E = _sum_all_paths(ls.prep.mesh, res, ls.P, ls.L, eta, intensity_np, n_P, sigma_t, visibility)
+        return (E, cast(ExhaustiveSolution, ls.to_global()).solution) if return_solution else E
     feats = prep.features if isinstance(features, str) else features
-    sol = solve(prep, P, L, eta=eta, method=method, features=feats, **options)
-    P_b = jnp.broadcast_to(jnp.asarray(P, dtype).reshape(-1, 3), (n, 3))
-    L_b = jnp.broadcast_to(jnp.asarray(L, dtype).reshape(-1, 3), (n, 3))
+    ls = solve_local(prep, P, L, eta=eta, method=method, features=feats, **options)
+    mesh, sol, P_b, L_b = ls.prep.mesh, cast(Solution, ls.result), ls.P, ls.L
     if feats is not None and feats.compact_lanes:
         E = _found_lanes_irradiance(mesh, sol, P_b, L_b, eta, intensity_np, n_P, sigma_t)
     else:
@@ -194,8 +198,8 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
                                jnp.asarray(n_P, dtype), sigma_t)
         E = jnp.where(sol.found, E, 0)
     if visibility:
-        E = _visible_only(prep, E, sol.found, P_b, sol.point, L_b)
-    return (E, sol) if return_solution else E
+        E = _visible_only(ls.prep, E, sol.found, P_b, sol.point, L_b)
+    return (E, ls.to_global()) if return_solution else E
 
 
 def _visible_only(prep, E, found, P, M, L):

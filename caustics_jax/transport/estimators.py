@@ -101,13 +101,15 @@ def _path_irradiance(mesh, face, ab, P, L, eta, intensity, n_P, sigma_t):
 
 
 def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
-    """The estimators' arguments, checked as `irradiance` checks them (docs/input_contract.md)."""
+    """The estimators' arguments, checked as `irradiance` checks them (docs/input_contract.md);
+    the surface and the points come back in the frame of `prep.local`, as `irradiance`
+    works (a far mesh moved near the origin, `prepared.local_origin`)."""
     prep = prepare(mesh)
     dtype = prep.dtype
     P_np, L_np = check_points("P", P, dtype), check_points("L", L, dtype)
     check_scene_scale(np.asarray(prep.mesh.vertices), (P_np, L_np), dtype)
-    P = jnp.asarray(P_np, dtype).reshape(-1, 3)
-    L = jnp.broadcast_to(jnp.asarray(L_np, dtype).reshape(-1, 3), P.shape)
+    P = jnp.asarray(prep.to_local(P_np).astype(dtype)).reshape(-1, 3)
+    L = jnp.broadcast_to(jnp.asarray(prep.to_local(L_np).astype(dtype)).reshape(-1, 3), P.shape)
     n = P.shape[0]
     n_P = check_receiver_normal(receiver_normal, n)
     I_e = check_fits("intensity", check_intensity(intensity), dtype)
@@ -118,7 +120,7 @@ def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
     check_fits("eta", check_eta(eta), dtype)
     check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), dtype)
     check_real("same_radius", same_radius, 0, lo_open=True)
-    return prep, P, L, n, n_P, I_e
+    return prep.local, P, L, n, n_P, I_e
 
 
 def _check_count(name, value, lo):

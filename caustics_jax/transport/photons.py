@@ -34,7 +34,7 @@ from ..arguments import check_eta, check_fits, check_int, check_points, check_re
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
-from ..prepared import PreparedSurface
+from ..prepared import PreparedSurface, prepare
 from ..progress import progress as progress_bar
 from ..start_points import build_bvh, first_crossing
 
@@ -228,10 +228,10 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
 
     Traced in the mesh's dtype; binned in float64.
     """
-    if isinstance(mesh, PreparedSurface):  # as solve and irradiance take it
-        mesh = mesh.mesh
-    if not isinstance(mesh, SurfaceMesh):
+    if not isinstance(mesh, SurfaceMesh | PreparedSurface):  # as solve and irradiance take it
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh or PreparedSurface, got {type(mesh).__name__}")
+    prep = prepare(mesh)
+    mesh = prep.mesh
     receiver = ReceiverGrid.check(receiver, allow_empty=True)
     n_photons = check_int("n_photons", n_photons, 0, MAX_PHOTONS)
     chunk = check_int("chunk", chunk, 1, 2**24)
@@ -244,7 +244,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     L_np = check_points("L", L, mesh.dtype)
     if L_np.shape != (3,):
         raise ValueError(f"L must be one point of shape (3,), got {L_np.shape}")
-    plane = EmissionPlane.covering(mesh, L_np)
+    EmissionPlane.covering(mesh, L_np)  # the light above the surface (the message in the caller's frame)
     if receiver.z >= float(np.min(np.asarray(mesh.vertices)[:, 2])):
         raise ValueError(f"the receiver plane (receiver.z = {receiver.z}) must lie below the surface")
     shape = (receiver.ny, receiver.nx)
@@ -252,7 +252,14 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
         zeros = np.zeros(shape)
         return PhotonMap(irradiance=zeros, stderr=zeros.copy(), hits=np.zeros(shape, np.int64),
                          n_photons=0 if n_photons == 0 else -(-n_photons // chunk) * chunk, receiver=receiver)
+    # Traced in the frame of `prep.local` (a far mesh moved near the origin,
+    # `prepared.local_origin`), binned in the receiver's.
+    origin = prep.origin
+    mesh = prep.local.mesh
     dtype = mesh.dtype
+    L_np = prep.to_local(L_np)
+    plane = EmissionPlane.covering(mesh, L_np)
+    x0, y0 = receiver.x0 - origin[0], receiver.y0 - origin[1]
     bvh = None if mesh.grid is not None else build_bvh(mesh)
     n_chunks = -(-n_photons // chunk)
     total = n_chunks * chunk
@@ -260,15 +267,15 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     E = np.zeros(receiver.nx * receiver.ny)
     E2 = np.zeros_like(E)
     hits = np.zeros(receiver.nx * receiver.ny, np.int64)
-    args = (jnp.asarray(L_np, dtype), jnp.asarray(tuple(plane), dtype), jnp.asarray(receiver.z, dtype),
+    args = (jnp.asarray(L_np, dtype), jnp.asarray(tuple(plane), dtype), jnp.asarray(receiver.z - origin[2], dtype),
             jnp.asarray(eta, dtype), jnp.asarray(sigma_t, dtype), jnp.asarray(intensity, dtype),
             jnp.asarray(total, dtype))
     with progress_bar(total=total, desc="photons", unit="photon", unit_scale=True) as bar:
         for i in range(n_chunks):
             Y, w, valid = (np.asarray(x) for x in _trace_chunk(
                 mesh, bvh, jax.random.fold_in(key, i), *args, chunk=chunk))
-            ix = np.floor((Y[:, 0] - receiver.x0) / receiver.dx)
-            iy = np.floor((Y[:, 1] - receiver.y0) / receiver.dy)
+            ix = np.floor((Y[:, 0] - x0) / receiver.dx)
+            iy = np.floor((Y[:, 1] - y0) / receiver.dy)
             inside = valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
             cell = (iy[inside] * receiver.nx + ix[inside]).astype(np.int64)
             w = w[inside].astype(np.float64)
