@@ -234,6 +234,11 @@ def bracket_objective(V, N, P, L, ab, eta):
       the refracted ray points away from `L`. `f` is a sine: it also vanishes at an
       angle of pi and changes sign there in every orientation. Such points are no
       solution; a status other than OK keeps them out of every bracket and acceptance.
+      Also `BACKWARD` where `P` lies on the outer side of the shading plane at `M`
+      (`(P - M) . n_s >= 0`): the ray `M -> P` would leave through the surface, so
+      `refract(-w_P, -n_s, eta)` is outside its domain (GLSL's `refract` needs
+      `dot(N, I) < 0`) and its zero is no refraction. A receiver above the water had
+      been given such a point FOUND by the exhaustive reference and the tracer.
     - `g`: `f` in the "line" orientation. A true root flips both `f` and `g`; an
       orientation flip of one of them flips only that one (`arcs.root_between`).
 
@@ -243,7 +248,8 @@ def bracket_objective(V, N, P, L, ab, eta):
     def one(x):  # the path vectors and `r` once, both signs from them
         sine = _sine(V, N, P, L, x, eta)
         f, g = sine.signed("plane", V, N, P, L, x), sine.signed("line", V, N, P, L, x)
-        backward = (sine.status == ObjectiveStatus.OK) & (jnp.sum(sine.r * sine.w_L) <= 0)
+        outside = jnp.sum((P - sine.M) * sine.n_s) >= 0  # P beyond the tangent plane: no transmission
+        backward = (sine.status == ObjectiveStatus.OK) & ((jnp.sum(sine.r * sine.w_L) <= 0) | outside)
         return f, jnp.where(backward, ObjectiveStatus.BACKWARD, sine.status), g
 
     return jax.vmap(one)(ab)

@@ -301,3 +301,23 @@ def test_certified_reference_finds_every_path_of_a_receiver_under_the_light():
     assert len(distinct) == 3 and ex.count[0] == 3, (distinct, ex.all_points)
     d = np.linalg.norm(np.asarray(distinct)[:, None] - ex.all_points[0][None], axis=-1).min(1)
     assert np.all(d < PLANTED_TOL), d  # measured
+
+
+def test_a_receiver_mirrored_above_the_water_has_no_path():
+    """Mirroring `P` across the shading plane at a planted `M` leaves `refract(-w_P, -n_s)`
+    unchanged (only the normal component of `w_P` flips, and refract keeps the tangential
+    one): `f` vanishes at `M` again, with `P` above the water. The reference and the tracer
+    had returned that point FOUND; `bracket_objective` now calls it BACKWARD (`P` beyond the
+    plane at `M`), so no lane is FOUND, as the walk and Newton answer (NO_CROSSING: the
+    segment P -> L does not cross the surface)."""
+    mesh = _mesh("wavy")
+    p = planted_mesh_paths(mesh, 16, seed=7)
+    n_s = oracle.shading_normal(np.asarray(mesh.normals)[np.asarray(mesh.faces)[p.face]], p.ab)
+    up = p.P - 2 * np.sum((p.P - p.M) * n_s, -1, keepdims=True) * n_s
+    assert np.all(up[:, 2] > 0.15)  # above every crest (amplitude 0.05)
+    for kw in ({"method": "exhaustive", "return_all": True}, {"method": "walk", "solutions": "all"}):
+        res = solve(mesh, up, p.L, **kw)
+        status = np.asarray(res.solution.status)
+        assert not np.any(np.asarray(res.solution.found)) and np.all(np.asarray(res.count) == 0), kw
+        assert np.all((status == 1) | (status == 9)), (kw, status)  # NO_CROSSING / NO_SOLUTION
+    assert not np.any(np.asarray(solve(mesh, up, p.L, method="walk").found))

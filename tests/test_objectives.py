@@ -242,3 +242,25 @@ def test_a_path_whose_lengths_overflow_the_dtype_is_degenerate_not_a_root():
     assert list(status) == [ObjectiveStatus.OK, ObjectiveStatus.OK, ObjectiveStatus.DEGENERATE]
     np.testing.assert_allclose(f[1], f[0], rtol=1e-5)
     assert f[0] != 0
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_a_receiver_mirrored_beyond_the_shading_plane_is_backward_not_a_root(dtype):
+    """`refract(-w_P, -n_s, eta)` keeps the tangential part of `w_P` and rebuilds the
+    normal one, so `P` mirrored across the shading plane at `M` gives the same refracted
+    ray and `f = 0` again: a spurious root with `P` outside the medium. `bracket_objective`
+    (what every solver brackets and accepts) reports BACKWARD there; the plain signed sine
+    still vanishes (it only describes the formula)."""
+    from caustics_jax.objectives import bracket_objective
+
+    p = planted_paths(37, 256)
+    n_s = oracle.shading_normal(p.N, p.ab)
+    up = p.P - 2 * np.sum((p.P - p.M) * n_s, -1, keepdims=True) * n_s
+    run = jax.jit(jax.vmap(lambda V, N, P, L, ab: bracket_objective(V, N, P, L, ab[None], p.eta)))
+    for P, want in ((p.P, ObjectiveStatus.OK), (up, ObjectiveStatus.BACKWARD)):
+        V, N, P_, L, ab = _cast(p._replace(P=P), dtype)
+        f, status, _ = (np.asarray(x)[:, 0] for x in run(V, N, P_, L, ab))
+        assert np.all(status == want)
+        assert np.max(np.abs(f)) < ZERO_TOL[dtype]  # a root of f in both cases
+    f_up, st_up = objectives_j(*_cast(p._replace(P=up), dtype), p.eta)[0]
+    assert np.all(np.asarray(st_up) == ObjectiveStatus.OK) and np.max(np.abs(np.asarray(f_up))) < ZERO_TOL[dtype]

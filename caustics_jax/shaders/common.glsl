@@ -245,13 +245,14 @@ void cj_signed_sine(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, ou
 
 // objectives.bracket_objective at one point: f ('plane'), status (ObjectiveStatus: 0 OK,
 // 1 TIR, 2 degenerate, 3 BACKWARD: the refracted ray points away from L, where f ~ sin(pi)
-// also vanishes), and g ('line'). A true root flips both f and g (arcs.root_between).
+// also vanishes, or P lies beyond the shading plane at M, outside refract's domain), and g
+// ('line'). A true root flips both f and g (arcs.root_between).
 void cj_bracket_objective(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta,
                           out float f, out uint status, out float g) {
     vec3 M, n_s, w_P, w_L, r;
     bool degenerate = cj_path_vectors(V, N, P, L, ab, M, n_s, w_P, w_L);
     cj_signed_sines(M, n_s, w_P, w_L, degenerate, P, L, eta, r, f, g, status);
-    if (status == 0u && dot(r, w_L) <= 0.0) status = 3u;
+    if (status == 0u && (dot(r, w_L) <= 0.0 || dot(P - M, n_s) >= 0.0)) status = 3u;
 }
 
 // ------------------------------------------------------ transport (seed 001 eq. 25-33)
