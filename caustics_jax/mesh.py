@@ -250,25 +250,24 @@ class SurfaceMesh(eqx.Module):
             self.grid, x0=self.grid.x0 + float(offset[0]), y0=self.grid.y0 + float(offset[1]))
         return dataclasses.replace(self, vertices=jnp.asarray(V, self.dtype), grid=grid)
 
-    def check_grid(self) -> None:
-        """A `ValueError` when `grid` no longer describes the vertices' xy (a mesh moved in x
-        or y with `eqx.tree_at` keeps its static `grid`; only heights may change). The
-        start points trust the grid's cells: a translated generator mesh had found no
-        start point on any lane, silently `NO_CROSSING`. Tolerance: 4 ulps of the
-        largest xy coordinate in the mesh's dtype, plus `_check_grid`'s 1e-9 spacing."""
+    def grid_deviation(self) -> float:
+        """Largest distance (m, in x or y) of a vertex from its position on `grid` (0.0
+        without a grid); a `ValueError` when the vertex count does not fit the layout.
+        Rounding puts it at about half a spacing of the largest coordinate in the dtype the
+        xy values were last rounded to (which may be an earlier dtype or position:
+        `astype`, `translated`); `prepare` refuses a grid that no longer describes the
+        vertices and trusts its exact cells only within rounding (`prepared.grid_state`)."""
         if self.grid is None:
-            return
+            return 0.0
         g = self.grid
         xy = np.asarray(self.vertices, np.float64)[:, :2]
         if len(xy) != (g.nx + 1) * (g.ny + 1):
             raise ValueError(f"the mesh's vertices do not follow its GridInfo layout {g}")
-        want = g.vertex_xy()
-        tol = 4 * float(np.finfo(self.dtype).eps) * float(np.max(np.abs(want))) + 1e-9 * max(abs(g.dx), abs(g.dy))
-        off = np.flatnonzero(np.any(np.abs(xy - want) > tol, axis=-1))
-        if off.size:
-            raise ValueError(f"vertices {_name(off)} moved off the mesh's regular grid {g} (xy changed after it "
-                             "was built, e.g. with eqx.tree_at): rebuild it with SurfaceMesh.from_arrays (no "
-                             "grid) or SurfaceMesh.from_heightfield, or move it with mesh.translated(offset)")
+        return float(np.max(np.abs(xy - g.vertex_xy()), initial=0.0))
+
+    def without_grid(self) -> SurfaceMesh:
+        """The same arrays without the static `grid` (start points then bin the faces)."""
+        return dataclasses.replace(self, grid=None)
 
     def astype(self, dtype) -> SurfaceMesh:
         """The same mesh with float fields in `dtype` (float32 or float64)."""

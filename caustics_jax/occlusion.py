@@ -33,7 +33,9 @@ def segment_blocked(surface: SurfaceMesh | PreparedSurface, A, B, *, exclude_fac
 
     Args:
         surface: a `SurfaceMesh` or `PreparedSurface` (its cached acceleration structure is
-            used; `accel` overrides it, e.g. for a mesh traced inside jit).
+            used, on `prepare(surface).local`: a far mesh is tested near the origin; `accel`
+            overrides it, e.g. for a mesh traced inside jit, and then the segments are
+            tested where they lie).
         A, B: `(N, 3)` (or broadcastable) segment ends, the surface's float dtype. Traced
             arrays are accepted (inside a user's `jit`; their values are then not checked).
         exclude_face: `None` or `(N,)` int face indices whose crossings never block (-1:
@@ -54,8 +56,13 @@ def segment_blocked(surface: SurfaceMesh | PreparedSurface, A, B, *, exclude_fac
     exclude = _check_exclude(exclude_face, n, mesh.faces.shape[0])
     if not (isinstance(end_tolerance, (int, float)) and 0 <= end_tolerance < 0.5):
         raise ValueError(f"end_tolerance must be a number in [0, 0.5), got {end_tolerance!r}")
-    if accel is None:
-        accel = (prep if prep is not None else prepare(mesh)).accel
+    if accel is None:  # the prepared surface's own structure, in the frame of its `local`
+        prep = (prep if prep is not None else prepare(mesh))
+        if np.any(prep.origin):  # exact for points near the mesh
+            shift = jnp.asarray(prep.origin, mesh.dtype)
+            A, B = A - shift, B - shift
+        prep = prep.local
+        mesh, accel = prep.mesh, prep.accel
     if n == 0:
         return jnp.zeros(0, bool)
     face, _, _ = first_hit(mesh, accel, A, B, exclude, s_lo=end_tolerance, s_hi=1 - end_tolerance, widen=False)

@@ -15,8 +15,8 @@ repeated `solve` / `irradiance` calls on the same mesh do no host analysis at al
   on first use and shared by `start_points` and `occlusion.segment_blocked`.
 
 - `origin`, `local`: the point the solvers work about and the surface moved there
-  (`local_origin`): a mesh far from the coordinate origin is solved near it, so float32
-  keeps the digits its triangles need.
+  (`frames.local_origin`, `frames.local_mesh`): a mesh far from the coordinate origin is
+  solved near it, so float32 keeps the digits its triangles need.
 
 `solve` and `irradiance` accept a `PreparedSurface` wherever they accept a `SurfaceMesh`.
 The cache holds a weak reference to the mesh: a prepared surface lives as long as its mesh.
@@ -26,11 +26,14 @@ A mesh changed with `eqx.tree_at` (animated water) is a new object and is prepar
 from __future__ import annotations
 
 import copy
+import warnings
 import weakref
 
+import jax.numpy as jnp
 import numpy as np
 
 from .features import SceneFeatures, features
+from .frames import grid_state, local_mesh, local_origin
 from .lanes import padded_mesh
 from .mesh import SurfaceMesh
 from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, start_points
@@ -40,9 +43,14 @@ class _Analysis:
     """What `prepare` computes from a mesh; holds no reference to the mesh object itself,
     so the cache below can drop it when the mesh dies."""
 
-    def __init__(self, mesh: SurfaceMesh, *, moved: bool = False):
-        if not moved:  # (a `local` mesh is an exact move of a checked one, rounding included)
-            mesh.check_grid()
+    def __init__(self, mesh: SurfaceMesh):
+        self.grid = grid_state(mesh)
+        if self.grid == "stale":
+            warnings.warn(f"the mesh's vertices are up to {mesh.grid_deviation():.3g} m off its regular grid "
+                          f"{mesh.grid}: its xy changed after the grid was built (eqx.tree_at on vertices? only "
+                          "heights may change). The start points bin the faces instead of trusting the grid; "
+                          "rebuild it with SurfaceMesh.from_arrays or from_heightfield, or move it with "
+                          "mesh.translated(offset)", stacklevel=4)
         self.padded = padded_mesh(mesh)
         self.features: SceneFeatures = features(mesh)
         V = np.asarray(mesh.vertices, np.float64)
@@ -52,28 +60,6 @@ class _Analysis:
         self.bvh: FaceBVH | None = None
         self.origin = local_origin(V, mesh.dtype)
         self.local: PreparedSurface | None = None
-
-
-def local_origin(vertices, dtype) -> np.ndarray:
-    """`(3,)` float64: where the solvers put the origin for a mesh with these vertices.
-
-    float32 keeps about 7 digits of a coordinate, so far from the origin a triangle's
-    differences keep few: the 512-triangle wavy pool (edges 0.26 m) moved by
-    `(300, -300, 0)` m found 45 of 256 lanes in float32 (TIR 55, LEFT_MESH 17,
-    NOT_CONVERGED 139) and 1 of 256 at 3 km, against 256 of 256 when solved about its
-    centre. Each axis whose bounding-box centre lies farther from zero than the box's
-    largest side is moved to that centre; the others stay (zero for a mesh around the
-    origin, so its solves are bit for bit what they were). The centre is snapped to a
-    multiple of the axis's largest vertex coordinate's spacing in `dtype`, so
-    `V - origin` is exact: the solvers see the same triangles, only nearer.
-    """
-    V = np.asarray(vertices, np.float64)
-    if V.size == 0:
-        return np.zeros(3)
-    lo, hi = V.min(0), V.max(0)
-    centre, extent = (lo + hi) / 2, float(np.max(hi - lo))
-    step = np.spacing(np.max(np.abs(V), 0).astype(dtype)).astype(np.float64)
-    return np.where(np.abs(centre) > extent, np.round(centre / step) * step, 0.0)
 
 
 class PreparedSurface:
@@ -106,14 +92,16 @@ class PreparedSurface:
 
     @property
     def local(self) -> PreparedSurface:
-        """This surface moved by `-origin` (itself where `origin` is zero), built on first
-        use: `solve` and `irradiance` run here on `P - origin`, `L - origin` and move the
-        points they return back."""
-        if not np.any(self._a.origin):
+        """The surface the solvers run on, built on first use: this one moved by `-origin`,
+        without a grid whose exact cells no longer fit its vertices there (`grid_state`:
+        the far grid's rounding is 1.5e-5 m at 300 m in float32, many ulps near the
+        origin); itself for a mesh near the origin with an exact grid or none. `solve`,
+        `irradiance` and the rest run here on `P - origin`, `L - origin` and move the
+        points they return back. `prepare(prep.local.mesh)` is `prep.local`."""
+        if not np.any(self._a.origin) and self._a.grid in ("none", "exact"):
             return self
         if self._a.local is None:
-            local = self.mesh.translated(-self._a.origin)
-            self._a.local = PreparedSurface(local, _Analysis(local, moved=True))
+            self._a.local = _cached(local_mesh(self.mesh, self._a.origin))
         return self._a.local
 
     def to_local(self, X) -> np.ndarray:
@@ -122,7 +110,8 @@ class PreparedSurface:
 
     @property
     def accel(self) -> Accel:
-        """The start-point acceleration structure (`build_accel`), built on first use."""
+        """The start-point acceleration structure (`build_accel`: the grid's cells only
+        where they fit the vertices, `frames.grid_state`), built on first use."""
         if self._a.accel is None:
             self._a.accel = build_accel(self.mesh)
         return self._a.accel
@@ -139,15 +128,22 @@ class PreparedSurface:
         reference path), for comparisons; the cached analysis is not changed. Only for a
         surface near the origin (`origin` zero): elsewhere the solvers run on `local`, which
         builds its own structure."""
-        if np.any(self._a.origin):
-            raise ValueError(f"with_accel needs a surface near the origin; this one is solved about "
-                             f"{self._a.origin.tolist()}: use prepare(mesh).local.with_accel(...)")
+        if self.local is not self:
+            raise ValueError("with_accel needs a surface the solvers run on as it is (`local` is itself); this "
+                             f"one is solved about {self._a.origin.tolist()} or without its grid: use "
+                             "prepare(mesh).local.with_accel(...)")
         analysis = copy.copy(self._a)
         analysis.accel = accel
         return PreparedSurface(self.mesh, analysis)
 
     def start_points(self, P, L) -> StartPoint:
-        """`start_points.start_points` with this surface's acceleration structure."""
+        """`start_points.start_points` with this surface's acceleration structure, run on
+        `local` (`P`, `L` moved by `-origin` in their dtype, exactly for points near the
+        mesh); faces and barycentrics are the same in both frames."""
+        local = self.local
+        if local is not self:
+            shift = jnp.asarray(self._a.origin, self.dtype)
+            return local.start_points(jnp.asarray(P, self.dtype) - shift, jnp.asarray(L, self.dtype) - shift)
         return start_points(self.mesh, P, L, accel=self.accel)
 
     def may_cross(self, P: np.ndarray, L: np.ndarray) -> np.ndarray:
@@ -166,10 +162,15 @@ def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
         return mesh
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
-    key = id(mesh)
-    hit = _CACHE.get(key)
+    hit = _CACHE.get(id(mesh))
     if hit is not None and hit[0]() is mesh:
         return PreparedSurface(mesh, hit[1])
-    analysis = _Analysis(mesh)
+    return _cached(mesh)
+
+
+def _cached(mesh: SurfaceMesh) -> PreparedSurface:
+    """`mesh` analysed and entered in the cache (a `local` mesh too, so that `prepare` of
+    it, e.g. by the visibility test, finds the same analysis)."""
+    key, analysis = id(mesh), _Analysis(mesh)
     _CACHE[key] = (weakref.ref(mesh, lambda _, key=key, cache=_CACHE: cache.pop(key, None)), analysis)
     return PreparedSurface(mesh, analysis)

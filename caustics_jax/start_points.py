@@ -35,6 +35,7 @@ from ._precision import real_input_dtype
 from .bvh import FaceBVH, build_bvh, first_hit_bvh
 from .crossing import segment_triangle
 from .face_cells import FaceCells, bin_faces, cells_from_layout, first_hit_cells
+from .frames import on_exact_cells
 from .grid import detect_grid, grid_layout
 from .lanes import lane_bucket
 from .mesh import SurfaceMesh
@@ -61,10 +62,11 @@ class StartPoint(NamedTuple):
 
 def grid_cells(mesh: SurfaceMesh) -> FaceCells | None:
     """The exact cells of `mesh` when it is a regular heightfield grid: from `mesh.grid`
-    (static, so this works on a traced mesh), else recognised by `grid.detect_grid` from
+    (static, so this works on a traced mesh; on concrete arrays only where the vertices
+    lie on its cells, `frames.on_exact_cells`), else recognised by `grid.detect_grid` from
     the concrete arrays; None otherwise."""
-    if mesh.grid is not None:
-        return cells_from_layout(grid_layout(mesh.grid), mesh.dtype)
+    if mesh.grid is not None and (isinstance(mesh.vertices, jax.core.Tracer) or on_exact_cells(mesh)):
+        return cells_from_layout(grid_layout(mesh.grid), mesh.dtype)  # (a traced mesh's grid is trusted)
     _require_concrete(mesh, "recognising a grid")
     layout = detect_grid(np.asarray(mesh.vertices), np.asarray(mesh.faces))
     return None if layout is None else cells_from_layout(layout, mesh.dtype)
@@ -138,7 +140,7 @@ def _structure(mesh: SurfaceMesh, method: str, bvh: FaceBVH | None, accel: Accel
     if method == "auto":
         if accel is not None:
             return accel
-        cells = cells_from_layout(grid_layout(mesh.grid), mesh.dtype) if mesh.grid is not None else None
+        cells = grid_cells(mesh) if mesh.grid is not None else None
         if cells is not None:
             return cells
         if bvh is not None:

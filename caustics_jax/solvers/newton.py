@@ -53,9 +53,9 @@ from ..mesh import cross_edge
 from ..objectives import (
     ObjectiveStatus,
     angle_difference_residual,
+    bracket_objective,
     half_vector_residual,
     path_vectors,
-    signed_sine_and_status,
 )
 from ._solution import Solution, Status, confirm_found
 from .options import SolverOptions, check_choice, check_int, check_real, check_tol
@@ -172,8 +172,13 @@ class _State(NamedTuple):
 
 
 def _f_at(mesh, P, L, face, ab, eta):
+    """`f` ("plane") and status at one lane's `ab`, as every solver accepts a point
+    (`bracket_objective`: BACKWARD where the refracted ray points away from `L` or `P`
+    lies beyond the shading plane; Newton started on the mirror image of a solution had
+    converged there, FOUND with `P` above the water)."""
     V, N = mesh.triangle(face)
-    return signed_sine_and_status(V, N, P, L, ab, eta, orientation="plane")
+    f, status, _ = bracket_objective(V, N, P, L, ab[None], eta)
+    return f[0], status[0]
 
 
 def newton_init(mesh, P, L, face, ab0, found, eta, tol, beta0) -> _State:

@@ -185,7 +185,7 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     if all_paths:
         ls = solve_local(prep, P, L, eta=eta, method=method, solutions="all", **options)
         res = cast(ExhaustiveSolution, ls.result)  # every path per receiver
-        E = _sum_all_paths(ls.prep.mesh, res, ls.P, ls.L, eta, intensity_np, n_P, sigma_t, visibility)
+        E = _sum_all_paths(ls.prep, res, ls.P, ls.L, eta, intensity_np, n_P, sigma_t, visibility)
         return (E, cast(ExhaustiveSolution, ls.to_global()).solution) if return_solution else E
     feats = prep.features if isinstance(features, str) else features
     ls = solve_local(prep, P, L, eta=eta, method=method, features=feats, **options)
@@ -232,9 +232,10 @@ def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
     return scatter_lanes(E, g, real, E_g)
 
 
-def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t, visibility: bool = False):
+def _sum_all_paths(prep: PreparedSurface, res, P, L, eta, intensity, n_P, sigma_t, visibility: bool = False):
     """Sum `path_irradiance` over every solution of an `ExhaustiveSolution` (only the visible
-    ones with `visibility`)."""
+    ones with `visibility`), on the surface it was solved on."""
+    mesh = prep.mesh
     pts, tris, count = np.asarray(res.all_points), np.asarray(res.all_triangles), np.asarray(res.count)
     n, width = tris.shape
     V, N = mesh.triangle(jnp.asarray(tris))
@@ -247,6 +248,6 @@ def _sum_all_paths(mesh, res, P, L, eta, intensity, n_P, sigma_t, visibility: bo
     used = np.arange(width)[None] < count[:, None]
     if visibility and used.any():
         lane, k = np.nonzero(used)
-        visible = path_visible(mesh, P_b[lane, k], jnp.asarray(pts[lane, k], mesh.dtype), L_b[lane, k])
+        visible = path_visible(prep, P_b[lane, k], jnp.asarray(pts[lane, k], mesh.dtype), L_b[lane, k])
         used[lane[~visible], k[~visible]] = False
     return jnp.sum(jnp.where(jnp.asarray(used), E, 0), axis=1)
