@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .crossing import clip_to_box, first_of, triangle_crossing
+from .crossing import clip_to_box, finite_segments, first_of, triangle_crossing
 from .mesh import SurfaceMesh
 
 
@@ -79,6 +79,7 @@ def first_hit_bvh(mesh: SurfaceMesh, bvh: FaceBVH, A: Float[Array, "n 3"], B: Fl
 
 @eqx.filter_jit
 def _first_hit_bvh(vertices, mesh_faces, bvh, P, B, exclude, s_lo, s_hi, widen):
+    P, B = finite_segments(P, B)
     d = B - P
     exclude = jnp.full(P.shape[0], -1, jnp.int32) if exclude is None else exclude
     dtype = P.dtype

@@ -80,6 +80,15 @@ class FaceFrame(NamedTuple):
     V0_max: Float[Array, "*batch"]  # max |V0| component, for the rounding bound
 
 
+def finite_segments(A: Float[Array, "n 3"], B: Float[Array, "n 3"]):
+    """`(A, B)` with every lane holding a NaN or Inf made a zero-length segment at the
+    origin, which crosses nothing (the traversals' padding lanes): a NaN end had kept the
+    cell and BVH traversals looping forever (`start_points.first_crossing`,
+    `transport.path_visible`). Inside jit, where inputs are not checked."""
+    finite = jnp.all(jnp.isfinite(A) & jnp.isfinite(B), axis=-1, keepdims=True)
+    return jnp.where(finite, A, 0), jnp.where(finite, B, 0)
+
+
 def face_frames(V: Float[Array, "*batch 3 3"]) -> FaceFrame:
     """The `FaceFrame` of triangles `V`."""
     V0 = V[..., 0, :]

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .crossing import clip_to_box, face_frames, first_of, triangle_crossing
+from .crossing import clip_to_box, face_frames, finite_segments, first_of, triangle_crossing
 from .grid import GridLayout
 from .lanes import LANE_CHUNK, map_lanes
 from .mesh import SurfaceMesh
@@ -242,6 +242,7 @@ def cpu_chunk(cell_faces: int) -> int:
 
 @eqx.filter_jit
 def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, widen, chunk):
+    A, B = finite_segments(A, B)
     u, v, w = cells.axes
     dtype = A.dtype
     nu, nv = cells.shape

@@ -36,7 +36,7 @@ from .features import SceneFeatures, features
 from .frames import grid_state, local_mesh, local_origin
 from .lanes import padded_mesh
 from .mesh import SurfaceMesh
-from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, start_points
+from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, check_segments, start_points
 
 
 class _Analysis:
@@ -141,9 +141,10 @@ class PreparedSurface:
         `local` (`P`, `L` moved by `-origin` in their dtype, exactly for points near the
         mesh); faces and barycentrics are the same in both frames."""
         local = self.local
-        if local is not self:
+        if local is not self:  # checked as start_points checks them, then moved
+            P, L = check_segments(self.mesh, P, L)
             shift = jnp.asarray(self._a.origin, self.dtype)
-            return local.start_points(jnp.asarray(P, self.dtype) - shift, jnp.asarray(L, self.dtype) - shift)
+            return local.start_points(P - shift, L - shift)
         return start_points(self.mesh, P, L, accel=self.accel)
 
     def may_cross(self, P: np.ndarray, L: np.ndarray) -> np.ndarray:

@@ -93,7 +93,7 @@ def start_points(mesh: SurfaceMesh, P, L, *, method: str = "auto", bvh: FaceBVH 
     structure across calls, and when the mesh is traced. Inputs are validated here, outside
     jit; the work runs in a jitted core. `M0 = barycentric_point(V, barycentric)`.
     """
-    P, L = _validate(mesh, P, L)
+    P, L = check_segments(mesh, P, L)
     structure = _structure(mesh, method, bvh, accel)
     batch = P.shape[:-1]
     face, ab, found = first_crossing(mesh, P.reshape(-1, 3), L.reshape(-1, 3), accel=structure)
@@ -178,7 +178,10 @@ def _require_concrete(mesh: SurfaceMesh, what: str) -> None:
                          "(or bvh=) built outside")
 
 
-def _validate(mesh: SurfaceMesh, P, L):
+def check_segments(mesh: SurfaceMesh, P, L):
+    """`P`, `L` for `start_points` on `mesh`: real arrays of shape `(..., 3)` broadcast
+    together, floats only in the mesh's dtype and finite (concrete arrays), cast and
+    broadcast; a `ValueError` naming the problem otherwise (docs/input_contract.md)."""
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
     for name, x in (("P", P), ("L", L)):
@@ -209,5 +212,5 @@ def _validate(mesh: SurfaceMesh, P, L):
     return P, L
 
 
-__all__ = ["Accel", "FaceBVH", "FaceCells", "StartPoint", "build_accel", "build_bvh", "first_crossing",
-           "first_hit", "grid_cells", "segment_triangle", "start_points"]
+__all__ = ["Accel", "FaceBVH", "FaceCells", "StartPoint", "build_accel", "build_bvh", "check_segments",
+           "first_crossing", "first_hit", "grid_cells", "segment_triangle", "start_points"]

@@ -201,3 +201,25 @@ def test_a_far_surface_blocks_the_segments_it_blocks_near_the_origin():
     visible = path_visible(base, A_near, B_near, L_near)
     assert 0.3 < visible.mean() < 0.9
     np.testing.assert_array_equal(path_visible(far, A_far, B_far, L_far), visible)
+
+
+def test_a_nan_segment_crosses_nothing_and_path_visible_refuses_it():
+    """One NaN row had kept the cell and BVH traversals looping forever
+    (`first_crossing`, `path_visible`); inside jit such a lane now crosses nothing, and
+    `path_visible` refuses it at the boundary."""
+    from caustics_jax.start_points import first_crossing
+    from caustics_jax.transport.visibility import path_visible
+
+    pool = wavy_pool(512, dtype="float32").surface
+    A = jnp.asarray([[0.1, 0.2, -1.0], [np.nan, 0.0, -1.0], [0.3, 0.1, -1.0]], "float32")
+    B = jnp.asarray([[0.1, 0.2, 1.0], [0.0, 0.0, 1.0], [0.3, 0.1, 1.0]], "float32")
+    jittered = jittered_grid(512, 0.2, dtype=np.float32)  # binned faces
+    for kw in ({}, {"bvh": build_bvh(pool)}, {"accel": prepare(jittered).accel}):
+        mesh = jittered if "accel" in kw else pool
+        face, ab, found = (np.asarray(x) for x in first_crossing(mesh, A, B, **kw))
+        np.testing.assert_array_equal(found, [True, False, True])
+        assert face[1] == -1 and np.all(np.isfinite(ab))
+    with pytest.raises(ValueError, match="NaN"):
+        path_visible(pool, A, (A + B) / 2, B)
+    with pytest.raises(ValueError, match="float64 but the mesh is float32"):
+        path_visible(pool, np.asarray(A[::2], np.float64), (A[::2] + B[::2]) / 2, B[::2])

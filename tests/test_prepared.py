@@ -208,3 +208,27 @@ def test_every_entry_point_answers_a_far_scene_in_the_callers_frame():
     assert p0.hits.sum() > 1000
     np.testing.assert_array_equal(p1.hits, p0.hits)
     np.testing.assert_allclose(p1.irradiance, p0.irradiance, rtol=1e-9)
+
+
+def test_far_surfaces_check_their_start_point_inputs_and_moved_grids_do_not_warn():
+    import warnings
+
+    from caustics_jax.frames import grid_state
+
+    pool = wavy_pool(512, dtype="float32").surface
+    far = pool.translated((3e3, -3e3, 0.0))
+    P = np.array([[3e3, -3e3, -1.0]], np.float32)
+    L = P + np.float32(4.0) * np.array([[0, 0, 1]], np.float32)
+    for bad, match in ((P.astype(np.float64), "float64 but the mesh is float32"), (P.astype(bool), "bool"),
+                       (P[0, 0], "shape"), (np.full((1, 3), np.nan, np.float32), "NaN")):
+        for surface in (pool, far):  # the far one had cast them silently (its local frame)
+            with pytest.raises(ValueError, match=match):
+                prepare(surface).start_points(bad, L)
+    # Built far, moved to the origin: rounding of the far position (1.5-2.3% of a spacing),
+    # not a grid moved after it was built: binned without a warning.
+    for x0, dx in ((1e5, 0.26), (1e4, 0.02), (300.0, 0.001)):
+        H = np.zeros((9, 9))
+        m = SurfaceMesh.from_heightfield(H, x0=x0, y0=x0, dx=dx, dy=dx, dtype="float32").translated((-x0, -x0, 0))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert grid_state(m) == "rounded" and prepare(m).local.mesh.grid is None

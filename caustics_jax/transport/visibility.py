@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..prepared import PreparedSurface, prepare
-from ..start_points import first_crossing
+from ..start_points import check_segments, first_crossing
 
 
 def visibility_eps(dtype) -> float:
@@ -37,10 +37,18 @@ def path_visible(mesh, P, M, L) -> np.ndarray:
     `M -> L` is seed 001 §4's shadow ray (against the surface, the §6 limitation); `P -> M`
     is this project's extension (module docstring).
 
-    `P`, `M`, `L`: `(n, 3)` arrays (the mesh's dtype). One query of `2 n` segments.
+    `P`, `M`, `L`: `(n, 3)` arrays (the mesh's dtype; a `ValueError` for another float
+    dtype, a bad shape or a NaN, as `start_points` raises). One query of `2 n` segments.
     """
     prep: PreparedSurface = prepare(mesh)
     dtype = prep.dtype
+    # Checked as start points are (shape, dtype, finite: one NaN row had looped forever).
+    P, M = check_segments(prep.mesh, P, M)
+    M, L = check_segments(prep.mesh, M, L)
+    try:
+        P, M, L = jnp.broadcast_arrays(P, M, L)
+    except ValueError:
+        raise ValueError(f"P {P.shape}, M {M.shape} and L {L.shape} do not broadcast together") from None
     # In the frame of `prep.local` (a far mesh moved near the origin, `prepared.local_origin`):
     # float32 300 m away had judged 17 of 4000 segments otherwise than near the origin.
     P, M, L = (jnp.asarray(x, dtype).reshape(-1, 3) for x in (P, M, L))
