@@ -125,9 +125,9 @@ class PreparedSurface:
 
     def with_accel(self, accel: Accel) -> PreparedSurface:
         """This surface with another start-point structure (e.g. `build_bvh(mesh)`, the
-        reference path), for comparisons; the cached analysis is not changed. Only for a
-        surface near the origin (`origin` zero): elsewhere the solvers run on `local`, which
-        builds its own structure."""
+        reference path), for comparisons; the cached analysis is not changed. Only where
+        `local` is this surface (near the origin, with an exact grid or none): elsewhere the
+        solvers run on `local`, which builds its own structure."""
         if self.local is not self:
             raise ValueError("with_accel needs a surface the solvers run on as it is (`local` is itself); this "
                              f"one is solved about {self._a.origin.tolist()} or without its grid: use "
