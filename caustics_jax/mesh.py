@@ -240,7 +240,7 @@ class SurfaceMesh(eqx.Module):
         """The same mesh moved by `offset` (`(3,)` metres): vertices `V + offset` added in
         float64 and rounded once to the mesh's dtype, normals and adjacency unchanged, a
         `grid` moved with it. Exact when `offset` is a multiple of every vertex
-        coordinate's spacing (`prepared.local_origin` picks such offsets)."""
+        coordinate's spacing (`frames.local_origin` picks such offsets)."""
         offset = real_array("offset", offset)
         if offset.shape != (3,) or not np.all(np.isfinite(offset)):
             raise ValueError(f"offset must be 3 finite real numbers, got {offset!r}")
@@ -255,8 +255,9 @@ class SurfaceMesh(eqx.Module):
         without a grid); a `ValueError` when the vertex count does not fit the layout.
         Rounding puts it at about half a spacing of the largest coordinate in the dtype the
         xy values were last rounded to (which may be an earlier dtype or position:
-        `astype`, `translated`); `prepare` refuses a grid that no longer describes the
-        vertices and trusts its exact cells only within rounding (`prepared.grid_state`)."""
+        `astype`, `translated`); the start points use the grid's exact cells only within
+        rounding, and `prepare` warns about a grid moved after it was built
+        (`frames.grid_state`)."""
         if self.grid is None:
             return 0.0
         g = self.grid

@@ -100,7 +100,7 @@ def test_translating_the_whole_scene_translates_the_solution(dtype, t):
 
 # Far from the origin: solved where it lies, float32 found 45 of 256 lanes of this pool at
 # (300, -300, 0) m and 1 at 3 km (wrong TIR / LEFT_MESH / NOT_CONVERGED); `solve` now works
-# about the mesh's centre (`prepared.local_origin`). What is left is the rounding of the
+# about the mesh's centre (`frames.local_origin`). What is left is the rounding of the
 # moved vertices and of the returned point: measured max 1.25 (float32) and 1.42 (float64)
 # spacings of the largest coordinate over 12 offsets in 1e2..1e4 m; bound 4.
 

@@ -185,7 +185,7 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
     (`caustics_jax.compilation`; `CAUSTICS_JAX_COMPILATION_CACHE=0` turns it off).
 
     A mesh far from the coordinate origin is solved about its centre
-    (`prepared.local_origin`: `P`, `L` and the mesh moved by `-origin` in float64, exactly
+    (`frames.local_origin`: `P`, `L` and the mesh moved by `-origin` in float64, exactly
     for the mesh) and the points come back moved by `+origin`, rounded once: float32 keeps
     the digits the triangles need (docs/input_contract.md "Scale").
 

@@ -181,7 +181,7 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
     # Solved and summed in the frame of `prep.local` (a far mesh moved near the origin,
-    # `prepared.local_origin`); only a returned Solution moves back.
+    # `frames.local_origin`); only a returned Solution moves back.
     if all_paths:
         ls = solve_local(prep, P, L, eta=eta, method=method, solutions="all", **options)
         res = cast(ExhaustiveSolution, ls.result)  # every path per receiver

@@ -103,7 +103,7 @@ def _path_irradiance(mesh, face, ab, P, L, eta, intensity, n_P, sigma_t):
 def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
     """The estimators' arguments, checked as `irradiance` checks them (docs/input_contract.md);
     the surface and the points come back in the frame of `prep.local`, as `irradiance`
-    works (a far mesh moved near the origin, `prepared.local_origin`)."""
+    works (a far mesh moved near the origin, `frames.local_origin`)."""
     prep = prepare(mesh)
     dtype = prep.dtype
     P_np, L_np = check_points("P", P, dtype), check_points("L", L, dtype)

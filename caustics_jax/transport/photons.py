@@ -253,7 +253,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
         return PhotonMap(irradiance=zeros, stderr=zeros.copy(), hits=np.zeros(shape, np.int64),
                          n_photons=0 if n_photons == 0 else -(-n_photons // chunk) * chunk, receiver=receiver)
     # Traced in the frame of `prep.local` (a far mesh moved near the origin,
-    # `prepared.local_origin`), binned in the receiver's.
+    # `frames.local_origin`), binned in the receiver's.
     origin = prep.origin
     mesh = prep.local.mesh
     dtype = mesh.dtype

@@ -49,7 +49,7 @@ def path_visible(mesh, P, M, L) -> np.ndarray:
         P, M, L = jnp.broadcast_arrays(P, M, L)
     except ValueError:
         raise ValueError(f"P {P.shape}, M {M.shape} and L {L.shape} do not broadcast together") from None
-    # In the frame of `prep.local` (a far mesh moved near the origin, `prepared.local_origin`):
+    # In the frame of `prep.local` (a far mesh moved near the origin, `frames.local_origin`):
     # float32 300 m away had judged 17 of 4000 segments otherwise than near the origin.
     P, M, L = (jnp.asarray(x, dtype).reshape(-1, 3) for x in (P, M, L))
     if np.any(prep.origin):
