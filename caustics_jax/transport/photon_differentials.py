@@ -17,8 +17,8 @@ surface and lands on a receiver. Three estimates of how much its beam is compres
 - `texel_jacobian` / `photon_differential_irradiance`: the exact differential, the 2x2
   Jacobian by `jax.jacfwd` of "emission-plane point -> receiver-plane point" through the
   surface triangle (barycentrics extrapolated, interpolated normal, GLSL `refract`).
-  A photon of flux `Phi = I_e cos_e du dv / r_e^2` lands on `|det J| du dv`, so the
-  irradiance where it lands is `E = I_e T cos_e / (r_e^2 |det J|)` (times attenuation).
+  A photon of flux `Phi = I_e |cos_e| du dv / r_e^2` lands on `|det J| du dv`, so the
+  irradiance where it lands is `E = I_e T |cos_e| / (r_e^2 |det J|)` (times attenuation).
   Where one path reaches the receiver point this must equal the walk's
   `path_irradiance` (seed 001 eq. 25-33): the check that ties seeds 001 and 004 together.
 
@@ -40,7 +40,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._precision import float_inputs
 from ..barycentric import barycentric_coordinates, interpolated_normal
-from ..geometry import dot, norm, reflect, refract, safe_div, safe_normalize
+from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize
 from ..mesh import SurfaceMesh
 from ..objectives import orthonormal_frame
 from .differentials import validity_threshold
@@ -51,14 +51,58 @@ MODES = ("refract", "reflect")
 
 def triangle_area(x0, x1, x2) -> Float[Array, "*batch"]:
     """`|(x1 - x0) x (x2 - x0)| / 2` (Alg. 2's `TriArea`)."""
-    return norm(jnp.cross(x1 - x0, x2 - x0)) / 2
+    return _edge_area(x1 - x0, x2 - x0)
 
 
-def _scatter(l_dir, n, eta, mode):
-    """Alg. 2 line 1-2: `normalize(reflect(LDir, n))`, or `normalize(refract(LDir, n, 1/eta))`."""
+def _edge_area(e1, e2):
+    """Alg. 2's `TriArea` of the triangle spanned by the edges `e1, e2`."""
+    return norm(jnp.cross(e1, e2)) / 2
+
+
+def _sqrt_nonneg(k):
+    """`sqrt(max(k, 0))` with a finite gradient at and below 0 (the double where of `refract`)."""
+    pos = k > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, k, 1)), 0)
+
+
+def _scatter_pair(l0, n0, l1, n1, eta, mode):
+    """`(w0, w1 - w0, ok)`: Alg. 2 lines 1-2 (`normalize(reflect(LDir, n))` or
+    `normalize(refract(LDir, n, 1/eta))`) for a ray and its neighbour, the difference
+    expanded in `l1 - l0` and `n1 - n0`.
+
+    Neighbouring rays differ by about a texel over the distance it is seen from; taken as
+    the difference of two unit vectors, `w1 - w0` keeps only `eps / |w1 - w0|` of its
+    digits (float32, 0.1 mm texels: 1e-3, docs/irradiance.md). Expanded, every term is of
+    the size of the difference. `ok` is False where either ray is totally internally
+    reflected (GLSL `refract` returns 0), has no direction, or `eta <= 0`.
+    """
+    dl, dn = l1 - l0, n1 - n0
+    c0, c1 = dot(n0, l0), dot(n1, l1)
+    dc = dot(dn, l1) + dot(n0, dl)  # c1 - c0
     if mode == "reflect":
-        return safe_normalize(reflect(l_dir, n))
-    return safe_normalize(refract(l_dir, n, 1 / jnp.asarray(eta, l_dir.dtype)))
+        # GLSL reflect, r = I - 2 (N.I) N: r1 - r0 = dl - 2 (c1 dn + dc n0)
+        r0, r1 = reflect(l0, n0), reflect(l1, n1)
+        dr = dl - 2 * (c1[..., None] * dn + dc[..., None] * n0)
+        ok = jnp.ones(dr.shape[:-1], bool)
+    else:
+        # GLSL refract (MATH.md §1) with e = 1/eta: r = e I - (e c + s) N, s = sqrt(k),
+        # k = refraction_k(c, e); so r1 - r0 = e dl - (e c1 + s1) dn - (e dc + ds) n0 with
+        # ds = (k1 - k0) / (s1 + s0) and k1 - k0 = e^2 dc (c0 + c1).
+        eta = jnp.asarray(eta, l0.dtype)
+        e = safe_div(1, eta, eta > 0)
+        r0, r1 = refract(l0, n0, e), refract(l1, n1, e)
+        k0, k1 = refraction_k(c0, e), refraction_k(c1, e)
+        ok = (eta > 0) & (k0 >= 0) & (k1 >= 0)  # k < 0: total internal reflection, no ray
+        s0, s1 = _sqrt_nonneg(k0), _sqrt_nonneg(k1)
+        ds = safe_div(e * e * dc * (c0 + c1), s0 + s1, s0 + s1 > 0)
+        dr = e[..., None] * dl - (e * c1 + s1)[..., None] * dn - (e * dc + ds)[..., None] * n0
+    # normalize: w1 - w0 = dr / m1 - r0 (m1 - m0) / (m0 m1), m1 - m0 = dr.(r0 + r1) / (m0 + m1)
+    m0, m1 = norm(r0), norm(r1)
+    ok = ok & (m0 > 0) & (m1 > 0)
+    inv0, inv1 = safe_div(1, m0, m0 > 0), safe_div(1, m1, m1 > 0)
+    dm = safe_div(dot(dr, r0 + r1), m0 + m1, ok)
+    dw = dr * inv1[..., None] - r0 * (dm * inv0 * inv1)[..., None]
+    return r0 * inv0[..., None], dw, ok
 
 
 def _check_mode(mode):
@@ -69,15 +113,21 @@ def _check_mode(mode):
 @functools.partial(jax.jit, static_argnames=("mode",))
 def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_hit, eta, scale,
                        level, mode):
-    w00 = _scatter(l_dir, n00, eta, mode)
-    hit0 = x00 + t_hit[..., None] * w00
-    hit1 = x10 + t_hit[..., None] * _scatter(l_dir10, n10, eta, mode)
-    hit2 = x01 + t_hit[..., None] * _scatter(l_dir01, n01, eta, mode)
-    A = triangle_area(x00, x10, x01)
-    A_d = triangle_area(hit0, hit1, hit2)
-    ok = A > 0
-    sigma = jnp.sqrt(safe_div(A_d, A, ok)) * jnp.asarray(scale, A.dtype) ** level
-    ok = ok & jnp.isfinite(sigma)  # areas overflow beyond arguments.scale_range (float32 1e10 m): invalid
+    # Alg. 2 lines 3-6 on the caustic triangle's edges, hit_i - hit_00 = (x_i - x00) +
+    # t' (w_i - w00), not on the hits x + t' w: float32 loses eps |x| / texel in the absolute
+    # hits (8e-3 relative at 100 m from the origin with 1 mm texels; docs/irradiance.md).
+    _, dw10, ok10 = _scatter_pair(l_dir, n00, l_dir10, n10, eta, mode)
+    _, dw01, ok01 = _scatter_pair(l_dir, n00, l_dir01, n01, eta, mode)
+    dx10, dx01 = x10 - x00, x01 - x00
+    t = t_hit[..., None]
+    A = _edge_area(dx10, dx01)
+    A_d = _edge_area(dx10 + t * dw10, dx01 + t * dw01)
+    # t' <= 0: the receiver is behind the surface, which compression_ratio_exact rejects too
+    ok = ok10 & ok01 & (A > 0) & (t_hit > 0)
+    ratio = safe_div(A_d, A, ok)
+    ok = ok & jnp.isfinite(ratio)  # areas overflow beyond arguments.scale_range (float32 1e10 m): invalid
+    sigma = _sqrt_nonneg(jnp.where(ok, ratio, 0)) * jnp.asarray(scale, A.dtype) ** level
+    ok = ok & jnp.isfinite(sigma)
     return jnp.where(ok, sigma, 0), ok
 
 
@@ -96,7 +146,12 @@ def compression_ratio(
     `l_dir.n < 0`), `t_hit` the centre ray's hit distance `t'`, `scale`/`level` the
     cascade `s` and `c`. `mode="refract"` (into the medium, index ratio `1/eta`) or
     `"reflect"` (Alg. 2 as printed). Returns `(sigma, valid)`, `valid` False (and
-    `sigma = 0`) for a degenerate surface triangle.
+    `sigma = 0`) for a degenerate surface triangle, a ray totally internally reflected
+    (as `compression_ratio_exact`), `t_hit <= 0` or `eta <= 0`.
+
+    The caustic triangle is formed from differences (`x10 - x00`, and `w10 - w00` expanded
+    in `n10 - n00`, `l_dir10 - l_dir`), so the float32 error scales with the texel, not
+    with the distance from the origin (docs/irradiance.md, "float32").
     """
     _check_mode(mode)
     l_dir = jnp.asarray(l_dir)
@@ -106,25 +161,35 @@ def compression_ratio(
                               jnp.asarray(t_hit, l_dir.dtype), eta, scale, level, mode)
 
 
-def _to_plane(x, w, point, normal):
-    """Ray `x + t w` on the plane `(point, normal)`: `(hit, t, ok)`; `ok` needs `t > 0`."""
+def _plane_distance(x_rel, w, normal):
+    """`(t, ok)`: the ray `x + t w` meets the plane `(point, normal)` at `t`, given
+    `x_rel = x - point` (a difference, so that no absolute point enters); `ok` False where
+    the ray is parallel to the plane (`t = 0` there)."""
     den = dot(w, normal)
-    ok_den = jnp.abs(den) > 0
-    t = safe_div(dot(point - x, normal), den, ok_den)
-    return x + t[..., None] * w, t, ok_den & (t > 0)
+    ok = jnp.abs(den) > 0
+    return safe_div(-dot(x_rel, normal), den, ok), ok
 
 
 @functools.partial(jax.jit, static_argnames=("mode",))
 def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, point, normal,
                              eta, mode):
-    hits, ok = [], True
-    for x, n, d in ((x00, n00, l_dir), (x10, n10, l_dir10), (x01, n01, l_dir01)):
-        y, _, hit = _to_plane(x, _scatter(d, n, eta, mode), point, normal)
-        hits.append(y)
-        ok = ok & hit
+    # As _compression_ratio, on the receiver triangle's edges: with y_i = x_i + t_i w_i on
+    # the plane, y_i - y00 = (x_i - x00) + t_i (w_i - w00) + (t_i - t00) w00 and
+    # t_i - t00 = -((x_i - x00).n + t00 (w_i - w00).n) / (w_i.n).
+    w00, dw10, ok10 = _scatter_pair(l_dir, n00, l_dir10, n10, eta, mode)
+    _, dw01, ok01 = _scatter_pair(l_dir, n00, l_dir01, n01, eta, mode)
+    t00, hit = _plane_distance(x00 - point, w00, normal)
+    ok = ok10 & ok01 & hit & (t00 > 0)
+    edges = []
+    for dx, dw in ((x10 - x00, dw10), (x01 - x00, dw01)):
+        den = dot(w00 + dw, normal)
+        hit = jnp.abs(den) > 0
+        dt = safe_div(-(dot(dx, normal) + t00 * dot(dw, normal)), den, hit)
+        ok = ok & hit & (t00 + dt > 0)  # each ray meets the plane in front of the surface
+        edges.append(dx + (t00 + dt)[..., None] * dw + dt[..., None] * w00)
     A = triangle_area(x00, x10, x01)
     ok = ok & (A > 0)
-    ratio = safe_div(triangle_area(*hits), A, ok)
+    ratio = safe_div(_edge_area(*edges), A, ok)
     ok = ok & jnp.isfinite(ratio)  # as in _compression_ratio
     return jnp.where(ok, ratio, 0), ok
 
@@ -140,8 +205,9 @@ def compression_ratio_exact(
     The reference for `compression_ratio`'s same-`t'` shortcut (MATH.md §7): no shared
     `t'`, the caustic triangle lies on the receiver. Arguments as `compression_ratio`,
     plus the receiver plane `(receiver_point, receiver_normal)`. Returns
-    `(ratio, valid)`; `valid` False where a ray misses the plane (parallel or behind) or
-    the surface triangle is degenerate.
+    `(ratio, valid)`; `valid` False where a ray misses the plane (parallel or behind), is
+    totally internally reflected, the surface triangle is degenerate or `eta <= 0`. The
+    receiver triangle is formed from differences, as in `compression_ratio`.
     """
     _check_mode(mode)
     l_dir = jnp.asarray(l_dir)
@@ -161,20 +227,29 @@ def _texel_trace(uv, V, N, L, X, eta, point, normal):
 
     The ray from `L` through `X + (u, v, 0)` meets the triangle's plane (barycentrics
     extrapolated past the edges, so the map is smooth), refracts there at the normalised
-    interpolated normal, and runs to the receiver plane.
+    interpolated normal, and runs to the receiver plane. Points are carried relative to
+    `X`, `V0` and the receiver point, never as absolute coordinates (float32 would lose
+    `eps |x|` of the barycentrics and the landing point far from the origin).
     """
-    Xu = X + jnp.concatenate([uv, jnp.zeros(1, uv.dtype)])
-    d_raw = Xu - L
+    duv = jnp.concatenate([uv, jnp.zeros(1, uv.dtype)])
+    d_raw = (X - L) + duv
     r_e = norm(d_raw)
-    d = d_raw / r_e
+    ok_e = r_e > 0  # X == L: the photon has no direction
+    d = d_raw * safe_div(1, r_e, ok_e)
     E1, E2 = V[1] - V[0], V[2] - V[0]
-    M, _, ok_s = _to_plane(L, d, V[0], jnp.cross(E1, E2))
-    n_s = safe_normalize(interpolated_normal(N, barycentric_coordinates(E1, E2, M - V[0])))
-    r, T, ok_n = refract_into_medium(d, n_s, eta)
-    Y, t, ok_r = _to_plane(M, r, point, normal)
+    XV = (X - V[0]) + duv
+    t_x, ok_s = _plane_distance(XV, d, jnp.cross(E1, E2))
+    ok_s = ok_s & (t_x + r_e > 0)  # in front of L
+    MV = XV + t_x * d  # M - V0
+    n_s = safe_normalize(interpolated_normal(N, barycentric_coordinates(E1, E2, MV)))
+    ok_eta = eta > 0
+    r, T, ok_n = refract_into_medium(d, n_s, jnp.where(ok_eta, eta, 1))
+    MP = MV + (V[0] - point)  # M - point
+    t, ok_r = _plane_distance(MP, r, normal)
+    YP = MP + t * r  # Y - point
     e1, e2 = orthonormal_frame(normal)
-    coords = jnp.stack([dot(Y - point, e1), dot(Y - point, e2)])
-    return coords, (Y, T, -d[2], r_e, t, ok_s & ok_n & ok_r)
+    coords = jnp.stack([dot(YP, e1), dot(YP, e2)])
+    return coords, (point + YP, T, -d[2], r_e, t, ok_e & ok_s & ok_eta & ok_n & ok_r & (t > 0))
 
 
 def _texel_one(V, N, L, X, eta, point, normal):
@@ -203,6 +278,10 @@ def texel_jacobian(
     `orthonormal_frame(receiver_normal)`. Returns `(J (2,2), Y (3,), T, cos_e, r_e, t,
     valid)`: the landing point, Fresnel transmittance, cosine of the photon direction
     with the emission-plane normal (+z), light-to-`X` distance, path length in the medium.
+    `valid` is False (the other outputs finite, with finite gradients, but meaningless)
+    where `X = L`, the ray misses the triangle's plane (parallel, or behind `L`), meets
+    the shading normal from below, is totally internally reflected, misses the receiver
+    (parallel or behind), or `eta <= 0`.
     """
     dtype = jnp.asarray(X).dtype
     normal = safe_normalize(jnp.asarray(receiver_normal, dtype))
@@ -215,21 +294,23 @@ def texel_jacobian(
 @jax.jit
 def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, receiver_normal,
                                    sigma_t=0.0):
-    """Irradiance where the photon through `X` lands: `I_e T A cos_e / (r_e^2 |det J|)`.
+    """Irradiance where the photon through `X` lands: `I_e T A |cos_e| / (r_e^2 |det J|)`.
 
     MATH.md §7's flux bookkeeping, `Phi / A'`, with the exact landing area.
 
-    Flux `I_e cos_e du dv / r_e^2` through the emission texel `du dv` (photons.py), times
+    Flux `I_e |cos_e| du dv / r_e^2` through the emission texel `du dv` (photons.py), times
     `T` and `A = exp(-sigma_t t)`, over its landing area `|det J| du dv` (`texel_jacobian`).
-    Returns `(E, Y, valid)`: `E = 0` where invalid or `|det J|` is below `sqrt(eps)` of
-    its scale (on a caustic, where the irradiance of a single photon tube is unbounded).
+    Returns `(E, Y, valid)`: `E = 0` where `texel_jacobian` is invalid or `|det J|` is
+    below `sqrt(eps)` of its scale (on a caustic, where the irradiance of a single photon
+    tube is unbounded). `|cos_e|`: a photon crossing the emission plane upward (a light
+    below it) carries positive flux too.
     """
     J, Y, T, cos_e, r_e, t, ok = texel_jacobian(V, N, L, X, eta, receiver_point, receiver_normal)
     det = jnp.abs(J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0])
     scale = jnp.sum(J**2, axis=(-2, -1))
     ok = ok & (det > validity_threshold(det.dtype) * scale)
     dtype = det.dtype
-    E = (jnp.asarray(intensity, dtype) * T * jnp.exp(-jnp.asarray(sigma_t, dtype) * t) * cos_e
+    E = (jnp.asarray(intensity, dtype) * T * jnp.exp(-jnp.asarray(sigma_t, dtype) * t) * jnp.abs(cos_e)
          * safe_div(1, r_e**2 * det, ok))
     return jnp.where(ok, E, 0), Y, ok
 
@@ -246,19 +327,37 @@ def footprint_ellipse(dY_du: Float[Array, "*batch 2"], dY_dv: Float[Array, "*bat
     `J = [dY_du | dY_dv]`: its semi-axes are the singular values `s1 >= s2` of `J`, along
     the left singular vectors, and its area `pi s1 s2 = pi |det J|`. Returns
     `(axes (*batch, 2), directions (*batch, 2, 2) as rows, area)`.
+
+    `s1` from the eigenvalues of `J J^T`, `s2 = |det J| / s1` (the difference
+    `half_trace - root` would cancel: float32 lost the minor axis from aspect 1e4); the
+    error is a few `eps s1`, the conditioning of a singular value (docs/irradiance.md).
+    At a circle (`s1 = s2`) the semi-axes are not differentiable: both get the gradient of
+    the mean of the one-sided derivatives (that of `sqrt((s1^2 + s2^2) / 2)`, `J/2` at
+    `J = I`) and the directions, arbitrary there, are the x and y axes with zero gradient;
+    at a singular `J` the gradient of `s2` is 0 (`d|det|` at 0). Values and gradients are
+    finite for finite `J` (`J` is scaled by its largest entry first, so its squares do not
+    overflow); the area overflows where `pi s1 s2` exceeds the dtype's range.
     """
     J = jnp.stack([dY_du, dY_dv], -1)
+    # scale-free: m s(J / m) with m held constant has the gradient of s(J) (s is homogeneous)
+    m = jax.lax.stop_gradient(jnp.max(jnp.abs(J), axis=(-2, -1)))
+    Js = safe_div(J, m[..., None, None], (m > 0)[..., None, None])
     # Symmetric 2x2 eigenproblem of J J^T in closed form (no LAPACK call, works in float32).
-    a, b, c = (J[..., 0, 0] ** 2 + J[..., 0, 1] ** 2, J[..., 0, 0] * J[..., 1, 0] + J[..., 0, 1] * J[..., 1, 1],
-               J[..., 1, 0] ** 2 + J[..., 1, 1] ** 2)
+    a, b, c = (Js[..., 0, 0] ** 2 + Js[..., 0, 1] ** 2,
+               Js[..., 0, 0] * Js[..., 1, 0] + Js[..., 0, 1] * Js[..., 1, 1],
+               Js[..., 1, 0] ** 2 + Js[..., 1, 1] ** 2)
     half_trace, diff = (a + c) / 2, (a - c) / 2
-    root = jnp.sqrt(diff**2 + b**2)
-    lam1, lam2 = half_trace + root, jnp.maximum(half_trace - root, 0)
-    theta = 0.5 * jnp.arctan2(2 * b, a - c)
+    q = diff**2 + b**2
+    round_ = q > 0  # False at a circle: double eigenvalue, sqrt and arctan2 have no derivative
+    root = _sqrt_nonneg(q)
+    s1 = _sqrt_nonneg(half_trace + root)
+    det = jnp.abs(Js[..., 0, 0] * Js[..., 1, 1] - Js[..., 0, 1] * Js[..., 1, 0])
+    s2 = jnp.minimum(safe_div(det, s1, s1 > 0), s1)
+    theta = 0.5 * jnp.where(round_, jnp.arctan2(jnp.where(round_, 2 * b, 0), jnp.where(round_, a - c, 1)), 0)
     u1 = jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
     u2 = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
-    det = jnp.abs(J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0])
-    return jnp.stack([jnp.sqrt(lam1), jnp.sqrt(lam2)], -1), jnp.stack([u1, u2], -2), jnp.pi * det
+    axes = jnp.stack([s1, s2], -1) * m[..., None]
+    return axes, jnp.stack([u1, u2], -2), jnp.pi * (s1 * m) * (s2 * m)
 
 
 @functools.partial(jax.jit, static_argnames=("window", "nx", "ny"))

@@ -1,5 +1,6 @@
 """Photon differentials (seed 004 eq. 10-11, Alg. 2; seed 003 footprints) against closed forms."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -16,9 +17,11 @@ from caustics_jax.transport import (
 from caustics_jax.transport.photon_differentials import light_view_texels
 
 DTYPES = [jnp.float32, jnp.float64]
-# Paraxial closed forms hold to O(delta^2 / h^2) = 2.5e-7 (float64); float32 loses
-# eps * t' / delta ~ 1e-4 in the differences of nearby hits.
-TOL = {jnp.float32: 2e-3, jnp.float64: 1e-6}
+# Paraxial closed forms hold to O(delta^2 / h^2) = 2.5e-7 (float64; measured 4.8e-8). float32
+# measured max 2.2e-7 in these closed-form tests (the caustic triangles are formed from
+# differences, so nearby hits lose no digits; before, from absolute hits, eps t' / delta was
+# feared and 2e-3 allowed).
+TOL = {jnp.float32: 2e-6, jnp.float64: 1e-6}
 UP = np.array([0.0, 0.0, 1.0])
 
 
@@ -166,3 +169,248 @@ def test_compression_ratios_beyond_the_scale_band_are_invalid_not_nan():
     np.testing.assert_allclose([rows[1][0], rows[1][2]], [rows[0][0], rows[0][2]], rtol=1e-5)
     for sig, ok, ex, ok_ex in rows[2:]:
         assert (sig, ok, ex, ok_ex) == (0.0, False, 0.0, False)
+
+
+# --------------------------------------------------------------------------- float32 and degenerate lanes
+
+EPS32 = float(np.finfo(np.float32).eps)
+OFFSETS, TEXELS = (0.0, 10.0, 100.0, 1000.0), (1e-2, 1e-3, 1e-4)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _np_scatter(l, n, eta, mode):
+    """GLSL reflect / refract(l, n, 1/eta), normalised, in numpy float64 (the independent reference)."""
+    c = np.sum(l * n, -1, keepdims=True)
+    if mode == "reflect":
+        return _unit(l - 2 * c * n)
+    e = 1 / eta
+    return _unit(e * l - (e * c + np.sqrt(1 - e**2 * (1 - c**2))) * n)
+
+
+def _texel_patches(lanes=48):
+    """Texel triangles over every (offset, texel size) of the sweep, lit by a point light 3 m up
+    (own light direction per neighbour), normals varying by 20 texels per metre; float32-rounded."""
+    rng = np.random.default_rng(7)
+    rows = []
+    for off in OFFSETS:
+        for h in TEXELS:
+            x00 = np.array([off, off, 0.0]) + rng.uniform(-1, 1, (lanes, 3)) * [1, 1, 0.01]
+            n00 = _unit([0, 0, 1] + 0.2 * rng.normal(size=(lanes, 3)))
+            n10, n01 = (_unit(n00 + 20 * h * rng.normal(size=(lanes, 3))) for _ in range(2))
+            x10, x01 = x00 + [h, 0, 0], x00 + [0, h, 0]
+            L = np.array([off + 0.5, off - 0.3, 3.0])
+            t = rng.uniform(1, 5, lanes)
+            rows.append([x00, x10, x01, n00, n10, n01, _unit(x00 - L), _unit(x10 - L), _unit(x01 - L), t,
+                         np.broadcast_to([off, off, -3.0], (lanes, 3))])
+    return [np.concatenate(c).astype(np.float32).astype(np.float64) for c in zip(*rows, strict=True)]
+
+
+def _np_ratios(a, mode, eta=1.333):
+    """(same-t' A'/A, its conditioning, receiver A'/A (NaN where a ray meets the horizontal
+    receiver behind the surface), its conditioning), float64 from absolute hits. The
+    conditioning: the sine of the angle between the caustic triangle's edges, for the
+    receiver times the smallest `|w.n|` of the three ray-plane hits (inverse condition numbers)."""
+    x00, x10, x01, n00, n10, n01, l00, l10, l01, t, P = a
+    xs = (x00, x10, x01)
+    w = [_np_scatter(li, ni, eta, mode) for li, ni in ((l00, n00), (l10, n10), (l01, n01))]
+    A = np.linalg.norm(np.cross(x10 - x00, x01 - x00), axis=-1)
+    t_rec = [(P[:, 2] - x[:, 2]) / wi[:, 2] for x, wi in zip(xs, w, strict=True)]
+    out = []
+    for ts in ([t] * 3, t_rec):
+        pts = [x + ti[:, None] * wi for x, ti, wi in zip(xs, ts, w, strict=True)]
+        e1, e2 = pts[1] - pts[0], pts[2] - pts[0]
+        c = np.linalg.norm(np.cross(e1, e2), axis=-1)
+        out += [np.where(np.all(np.stack(ts) > 0, 0), c / A, np.nan),
+                c / (np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1))]
+    out[3] = out[3] * np.min(np.abs(np.stack([wi[:, 2] for wi in w])), 0)  # and 1/|w.n| of each ray-plane hit
+    return out
+
+
+@pytest.mark.parametrize("mode", ["refract", "reflect"])
+def test_compression_ratios_float32_error_scales_with_the_texel_not_the_offset(mode):
+    """float32 against float64 on the same float32-rounded inputs, surfaces 0..1000 m from the
+    origin, texels 1 cm..0.1 mm, error times the inverse condition number (`_np_ratios`):
+    measured max 1.3e-6 = 10.5 eps over 2000 lanes per cell (both modes, both ratios;
+    docs/irradiance.md); bound 32 eps. The absolute hits x + t' w had given up to 4.0 (same
+    t') and 2.1 (receiver) at 1000 m, 0.1 mm. float64 against numpy: measured 1.5e-9, the
+    reference's own error (it forms the absolute hits: eps64 * 1000 m / 0.1 mm * t'); bound 2e-8."""
+    a64 = _texel_patches()
+    if mode == "reflect":  # the receiver 3 m above the surface
+        a64[10] = a64[10] * [1, 1, -1]
+    sig2_ref, sin_s, ratio_ref, sin_r = _np_ratios(a64, mode)
+    res = {}
+    for dtype in DTYPES:
+        a = [jnp.asarray(v, dtype) for v in a64]
+        sig, ok = compression_ratio(*a[:7], a[9], mode=mode, l_dir10=a[7], l_dir01=a[8])
+        ratio, ok_x = compression_ratio_exact(*a[:7], a[10], jnp.asarray(UP, dtype), mode=mode, l_dir10=a[7],
+                                              l_dir01=a[8])
+        assert sig.dtype == dtype and bool(jnp.all(ok))
+        # reflected rays that leave downward never meet the receiver above: invalid
+        np.testing.assert_array_equal(np.asarray(ok_x), ~np.isnan(ratio_ref))
+        res[dtype] = np.asarray(sig, np.float64) ** 2, np.asarray(ratio, np.float64), np.asarray(ok_x)
+    for k, (ref, sine) in enumerate(((sig2_ref, sin_s), (ratio_ref, sin_r))):
+        ok = res[jnp.float64][2] if k else np.ones(len(ref), bool)
+        r64, r32, ref, sine = res[jnp.float64][k][ok], res[jnp.float32][k][ok], ref[ok], sine[ok]
+        err64, err32 = np.abs(r64 - ref) / ref * sine, np.abs(r32 - r64) / r64 * sine
+        assert ok.mean() > 0.9 and err64.max() < 2e-8, (k, err64.max())
+        assert err32.max() < 32 * EPS32, (k, err32.max())
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_compression_ratio_marks_total_internal_reflection_invalid_like_the_exact_ratio(dtype):
+    """eta < 1 (a ray leaving the denser medium) past the critical angle, asin(eta): GLSL refract
+    returns 0, the "hits" stay on the surface, and the same-t' ratio had read sigma = 1, valid,
+    where the exact ratio rejects the lane. One neighbour alone past it counts too. And t' <= 0
+    (the receiver behind the surface) is invalid as the exact ratio's rays behind the plane."""
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    theta = np.radians(np.r_[np.arange(0, 85, 5), 47.0, 47.0])  # critical angle 48.6 deg at eta = 0.75
+    n = len(theta)
+    l_dir = np.stack([np.sin(theta), np.zeros(n), -np.cos(theta)], -1)
+    tilt = np.zeros((n, 3))
+    tilt[-1] = [0.1, 0, 0]  # the last lane's neighbour x10 sees the light at 53 deg
+    x00, x10, x01 = np.zeros((n, 3)), np.tile([0.01, 0, 0], (n, 1)), np.tile([0, 0.01, 0], (n, 1))
+    up = np.tile(UP, (n, 1))
+    geo = [c(x00), c(x10), c(x01), c(up), c(_unit(up + tilt)), c(up)]
+    for eta in (0.75, 1e-3):  # 1e-3: only normal incidence transmits
+        valid = np.r_[np.sin(theta[:-1]) < eta, False]
+        sigma, ok = compression_ratio(*geo, c(l_dir), c(np.full(n, 2.0)), eta=eta)
+        ratio, ok_x = compression_ratio_exact(*geo, c(l_dir), c([0, 0, -2.0]), c(UP), eta=eta)
+        np.testing.assert_array_equal(np.asarray(ok), valid)
+        np.testing.assert_array_equal(np.asarray(ok_x), valid)
+        assert np.all(np.asarray(sigma)[~valid] == 0) and np.all(np.asarray(ratio)[~valid] == 0)
+    sigma, ok = compression_ratio(*geo, c(l_dir), c(np.r_[-1.0, 0.0, np.ones(n - 2)]), eta=1.333)
+    np.testing.assert_array_equal(np.asarray(ok), np.arange(n) >= 2)
+
+
+def _curved_triangles(lanes=24):
+    """Triangles (10 cm and 1 cm, random smooth normals) 0..1000 m from the origin under a light
+    3 m up, emission points 0.3 m up on the ray to a point near the centre; float32-rounded."""
+    rng = np.random.default_rng(8)
+    rows = []
+    for off in OFFSETS:
+        for size in (0.1, 0.01):
+            c = np.array([off, off, 0.0]) + rng.uniform(-1, 1, (lanes, 3)) * [1, 1, 0.02]
+            V = c[:, None] + size * np.array([[-0.5, -0.4, 0], [0.5, -0.4, 0.05], [0, 0.6, -0.03]])
+            N = _unit(UP + 0.3 * rng.normal(size=(lanes, 3, 3)) * [1, 1, 0])
+            L = np.broadcast_to([off + 0.3, off - 0.2, 3.0], (lanes, 3))
+            M = c + size * 0.1 * rng.uniform(-1, 1, (lanes, 3)) * [1, 1, 0]
+            X = L + (M - L) * ((0.3 - L[:, 2]) / (M[:, 2] - L[:, 2]))[:, None]
+            rows.append([V, N, L, X, np.broadcast_to([off, off, -1.0], (lanes, 3))])
+    return [np.concatenate(c).astype(np.float32).astype(np.float64) for c in zip(*rows, strict=True)]
+
+
+def test_texel_jacobian_float32_error_does_not_grow_with_the_offset():
+    """float32 against float64 on the same float32 inputs, triangles 0..1000 m from the origin:
+    relative error of J measured max 2.2e-6 = 19 eps (1000 lanes per cell), bound 48 eps; of E
+    times |det J| / |J|^2 (its inverse condition number) 1.2e-6 = 10 eps, bound 32 eps, where
+    both are valid (float32 rejects |det J| below sqrt(eps32) |J|^2 by design). Barycentrics
+    and landing points formed from absolute points had given 2.3e-3 (J) and 1.5e-3 (E) at
+    1000 m (docs/irradiance.md)."""
+    from caustics_jax.transport import photon_differential_irradiance
+
+    a64 = _curved_triangles()
+    out = {}
+    for dtype in DTYPES:
+        V, N, L, X, P = (jnp.asarray(v, dtype) for v in a64)
+        J, *_, ok = texel_jacobian(V, N, L, X, 1.333, P, jnp.asarray(UP, dtype))
+        E, _, ok_e = photon_differential_irradiance(V, N, L, X, 1.333, 1.0, P, jnp.asarray(UP, dtype))
+        assert J.dtype == dtype and bool(jnp.all(ok))
+        out[dtype] = np.asarray(J, np.float64), np.asarray(E, np.float64), np.asarray(ok_e)
+    (J64, E64, ok64), (J32, E32, ok32) = out[jnp.float64], out[jnp.float32]
+    err_J = np.linalg.norm(J32 - J64, axis=(-2, -1)) / np.linalg.norm(J64, axis=(-2, -1))
+    kappa = np.abs(np.linalg.det(J64)) / np.sum(J64**2, axis=(-2, -1))
+    assert np.all(ok64) and np.all(ok32 | (kappa < 2 * np.sqrt(EPS32)))
+    err_E = (np.abs(E32 - E64) / E64 * kappa)[ok32]
+    assert err_J.max() < 48 * EPS32 and err_E.max() < 32 * EPS32, (err_J.max(), err_E.max())
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_texel_jacobian_at_the_light_is_invalid_with_finite_values_and_gradients(dtype):
+    """X = L (finite input, no photon direction) had given NaN J, Y, cos_e and gradients; now
+    the lane is invalid, every output and the gradient of E finite, other lanes unchanged."""
+    from caustics_jax.transport import photon_differential_irradiance
+
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    V = c([[-1, -1, 0], [1, -1, 0], [0, 1, 0]])
+    N = c(_unit(np.array([[0.1, 0, 1], [0, 0.1, 1], [0, 0, 1]])))
+    L, P = c([0, 0, 2]), c([0, 0, -1])
+    X = c([[0, 0, 2], [0.1, -0.05, 1], [0, 0, 2], [-0.2, 0.1, 1]])
+
+    def total(X):
+        E, _, ok = photon_differential_irradiance(V, N, L, X, 1.333, 1.0, P, c(UP))
+        return jnp.sum(E), (E, ok)
+
+    @jax.jit  # one compile for both
+    def run(X):
+        return texel_jacobian(V, N, L, X, 1.333, P, c(UP)), jax.grad(total, has_aux=True)(X)
+
+    outs, (g, (E, ok)) = run(X)
+    np.testing.assert_array_equal(np.asarray(outs[-1]), [False, True, False, True])
+    assert all(np.all(np.isfinite(np.asarray(o))) for o in outs[:-1])
+    np.testing.assert_array_equal(np.asarray(ok), [False, True, False, True])
+    assert np.all(np.isfinite(np.asarray(g))) and np.all(np.asarray(g)[[0, 2]] == 0)
+    assert np.all(np.asarray(E)[[0, 2]] == 0) and np.all(np.asarray(E)[[1, 3]] > 0)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_photon_crossing_the_emission_plane_upward_carries_positive_flux(dtype):
+    """The scene mirrored in z (light below the surface, photons crossing the emission plane
+    upward, cos_e < 0) has the same irradiance; it had come out negative, valid."""
+    from caustics_jax.transport import photon_differential_irradiance
+
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    V = np.array([[-1, -1, 0], [1, -1, 0], [0, 1, 0.0]])
+    N = _unit(np.array([[0.1, 0, 1], [0, 0.1, 1], [0, 0, 1]]))
+    L, X, P = np.array([0.1, 0, 2]), np.array([[0.2, -0.1, 1], [-0.3, 0.2, 1]]), np.array([0, 0, -1.0])
+    flip = np.array([1, 1, -1])
+    E, _, ok = photon_differential_irradiance(c(V), c(N), c(L), c(X), 1.333, 1.0, c(P), c(UP))
+    E_up, _, ok_up = photon_differential_irradiance(c(V * flip), c(N * flip), c(L * flip), c(X * flip), 1.333,
+                                                    1.0, c(P * flip), c(UP))
+    assert bool(jnp.all(ok)) and bool(jnp.all(ok_up))
+    np.testing.assert_allclose(np.asarray(E_up), np.asarray(E), rtol=TOL[dtype] if dtype == jnp.float32 else 1e-12)
+
+
+def test_footprint_minor_axis_is_accurate_in_float32_at_any_aspect():
+    """Rotated ellipses of aspect 1e1..1e6: float32 semi-axes against the float64 SVD of the same
+    float32 J. A singular value moves by up to eps |J| under rounding, so the bound is on
+    `|ds| / s1`: measured max 1.9e-7 = 1.6 eps (s1) and 4.5e-8 (s2) over 2000 lanes per
+    aspect, bound 4 eps. `sqrt(half_trace - root)` had lost s2 (2.9e-4 s1; s2 = 0 from 1e4);
+    the area stays pi s1 s2."""
+    rng = np.random.default_rng(9)
+    aspect = np.repeat([1e1, 1e2, 1e3, 1e4, 1e6], 64)
+    a, b = rng.uniform(0, np.pi, (2, len(aspect)))
+    rot = lambda t: np.stack([np.stack([np.cos(t), -np.sin(t)], -1), np.stack([np.sin(t), np.cos(t)], -1)], -2)  # noqa: E731
+    S = np.zeros((len(aspect), 2, 2))
+    S[:, 0, 0], S[:, 1, 1] = 1, 1 / aspect
+    J = (rot(a) @ S @ rot(b) * rng.uniform(0.1, 10, (len(aspect), 1, 1))).astype(np.float32)
+    axes, _, area = footprint_ellipse(jnp.asarray(J[..., 0]), jnp.asarray(J[..., 1]))
+    s = np.linalg.svd(J.astype(np.float64), compute_uv=False)
+    err = np.abs(np.asarray(axes, np.float64) - s) / s[:, :1]
+    assert err.max() < 4 * EPS32, err.max(axis=0)
+    np.testing.assert_allclose(np.asarray(area), np.pi * np.prod(np.asarray(axes), -1), rtol=4 * EPS32)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_footprint_gradients_are_finite_at_a_circle_and_a_singular_J(dtype):
+    """At a circle (J = I) the semi-axes are not differentiable: each gets the mean of its
+    one-sided derivatives, d sqrt((s1^2 + s2^2)/2) = J/2, and the directions zero (they had
+    been NaN); at a singular J and at J = 0 every gradient is finite. Away from them the
+    gradient is the SVD's, u_i v_i^T (checked at J = diag(2, 1))."""
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+
+    def parts(J):
+        axes, dirs, area = footprint_ellipse(J[..., 0], J[..., 1])
+        return axes[..., 0], axes[..., 1], jnp.sum(dirs), area
+
+    grads = jax.jit(jax.vmap(jax.jacrev(parts)))
+    Js = c([np.eye(2), [[1.0, 2.0], [0.5, 1.0]], np.zeros((2, 2)), np.diag([2.0, 1.0])])
+    g1, g2, gd, ga = (np.asarray(g) for g in grads(Js))
+    assert all(np.all(np.isfinite(g)) for g in (g1, g2, gd, ga))
+    np.testing.assert_allclose(g1[0], np.eye(2) / 2, atol=1e-6)
+    np.testing.assert_allclose(g2[0], np.eye(2) / 2, atol=1e-6)
+    np.testing.assert_allclose(gd[0], 0, atol=1e-6)
+    np.testing.assert_allclose(g1[3], np.diag([1.0, 0.0]), atol=1e-6)
+    np.testing.assert_allclose(g2[3], np.diag([0.0, 1.0]), atol=1e-6)
