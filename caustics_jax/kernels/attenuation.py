@@ -15,7 +15,7 @@ from jaxtyping import Array, Float
 from .._precision import float_inputs
 from ..arguments import check_real
 from ..geometry import dot
-from ._util import as_float, check, check_last_axis, concrete, float_dtype
+from ._util import as_float, check, check_last_axis, concrete, float_dtype, tiny
 
 #: Focus bias of eq. 13 ("experimentally defined constant set to 0.95").
 GAMMA = 0.95
@@ -30,6 +30,8 @@ def intensity_attenuation(t: Float[Array, "*batch"], t_max, gamma=GAMMA) -> Floa
     With `x = 1 - t/t_max`: `1 - (x - gamma)/(1 - gamma)` if `x > gamma`, else
     `1 - (gamma - x)/gamma = x / gamma`. A tent in `t`: 0 at the surface, 1 at
     `t = (1 - gamma) t_max`, back to 0 at `t_max`. `t` is clipped to `[0, t_max]`.
+    Inside jit (unchecked) `t_max` is floored at the dtype's smallest normal number and
+    `gamma` clipped into `(0, 1)`, so a zero or invalid parameter gives a finite tent.
     """
     check(t_max, "t_max", lower=0, strict=True)
     check(gamma, "gamma", lower=0, strict=True, upper=1)
@@ -38,7 +40,8 @@ def intensity_attenuation(t: Float[Array, "*batch"], t_max, gamma=GAMMA) -> Floa
         raise ValueError(f"gamma must lie in (0, 1), got {gamma}")
     t = jnp.asarray(t)
     dtype = float_dtype(t)
-    t_max, gamma = as_float(t_max, dtype), as_float(gamma, dtype)
+    t_max = jnp.maximum(as_float(t_max, dtype), tiny(dtype))
+    gamma = jnp.clip(as_float(gamma, dtype), tiny(dtype), jnp.nextafter(jnp.asarray(1, dtype), 0))
     x = 1 - jnp.clip(t.astype(dtype), 0, t_max) / t_max
     return jnp.where(x > gamma, 1 - (x - gamma) / (1 - gamma), 1 - (gamma - x) / gamma)
 
@@ -75,14 +78,20 @@ def fresnel_reflect_approx(
     `F_refl = F_frac + (1 - F_frac) (1 - (-l_dir . n))^F_exp` for light travelling along
     `l_dir` onto a surface with normal `n`. The cosine is clamped to `[0, 1]` so a
     back-facing or slightly non-unit input cannot raise a negative base to a power.
+    At normal incidence the base `1 - cos` is 0 and `0^F_exp` is taken as its limit (0, or
+    1 for `F_exp = 0`) without differentiating `pow` there, whose derivatives are infinite
+    (`F_exp < 1`) or `0 log 0`.
     """
     check_last_axis(l_dir, "l_dir", 3)
     check(f_frac, "f_frac", lower=0, upper=1)
     check(f_exp, "f_exp", lower=0)
     dtype = float_dtype(l_dir, n)
     cos = jnp.clip(-dot(jnp.asarray(l_dir, dtype), jnp.asarray(n, dtype)), 0, 1)
-    f_frac = as_float(f_frac, dtype)
-    return f_frac + (1 - f_frac) * (1 - cos) ** as_float(f_exp, dtype)
+    f_frac, f_exp = as_float(f_frac, dtype), as_float(f_exp, dtype)
+    base = 1 - cos
+    lit = base > 0
+    power = jnp.where(lit, jnp.where(lit, base, 1) ** f_exp, jnp.where(f_exp == 0, 1, 0).astype(dtype))
+    return f_frac + (1 - f_frac) * power
 
 
 @float_inputs("l_dir", "n", params=("f_frac", "f_exp"))

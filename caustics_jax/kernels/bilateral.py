@@ -13,13 +13,13 @@ Two misreadings are settled here (docs/kernels.md):
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._precision import float_inputs
-from ..arguments import check_int
 from ..geometry import dot
-from ._util import as_float, check, check_last_axis, float_dtype
+from ._util import as_float, check, check_last_axis, float_dtype, ratio_scale, static_int, tiny
 
 #: Eq. 25's constant (default). Alg. 4 line 7 prints 0.144 instead.
 C_SCENE_FACTOR = 0.114
@@ -45,6 +45,12 @@ def bilateral_weight(
     `w_z = 1 / (|z_p - z_q| + eps)` (eq. 22), `w_pos = 1 / (1 + 10 d.d / delta^2)` with
     `d = pos_p - pos_q` (eq. 23). With the default `eps = 1` (Alg. 4 line 22), `w <= 1`
     and `w(p, p) = 1`, the centre weight of Alg. 4.
+
+    Eq. 23 is evaluated as `delta'^2 / (delta'^2 + 10 d'.d')` with `d`, `delta` divided
+    by their largest magnitude: `delta^2` alone underflows (float32 `delta = 1e-23` and
+    `p = q` gave 0/0) or overflows (`delta = |d| = 1e30`: inf/inf), the ratio does not.
+    Inside jit (unchecked) `delta = 0` gives the limit, 1 at `p = q` and 0 elsewhere, and
+    `eps` is floored at the dtype's smallest normal number.
     """
     check_last_axis(pos_p, "pos_p", 3)
     check(delta, "delta", lower=0, strict=True)
@@ -52,8 +58,12 @@ def bilateral_weight(
     dtype = float_dtype(z_p, z_q, pos_p, pos_q, delta)
     z_p, z_q, delta = (jnp.asarray(a, dtype) for a in (z_p, z_q, delta))
     d = jnp.asarray(pos_p, dtype) - jnp.asarray(pos_q, dtype)
-    w_z = 1 / (jnp.abs(z_p - z_q) + as_float(eps, dtype))
-    w_pos = 1 / (1 + 10 * dot(d, d) / (delta * delta))
+    w_z = 1 / (jnp.abs(z_p - z_q) + jnp.maximum(as_float(eps, dtype), tiny(dtype)))
+    scale = ratio_scale(d, delta)
+    d, delta = d / scale[..., None], delta / scale
+    delta2 = delta * delta
+    den = delta2 + 10 * dot(d, d)  # in [1, 11] unless delta = d = 0 (then 0)
+    w_pos = jnp.where(den > 0, delta2 / jnp.where(den > 0, den, 1), 1)
     return w_z * w_pos
 
 
@@ -125,10 +135,11 @@ def denoise_subpass(
             "expected C (H,W,3), depth (H,W), pos (H,W,3); "
             f"got {C.shape}, {depth.shape}, {pos.shape}"
         )
-    if isinstance(axis, bool) or axis not in (0, 1):
-        raise ValueError(f"axis must be 0 (y) or 1 (x), got {axis!r}")
+    axis = static_int("denoise_subpass", "axis", axis, 0, 1)
     dtype = float_dtype(C, depth, pos)
     C, depth, pos = C.astype(dtype), depth.astype(dtype), pos.astype(dtype)
+    if C.size == 0:  # no pixels (H or W = 0): nothing to gather along either axis
+        return C
     rho, lam, delta = adaptive_kernel_params(luminance(C), lum_l_min, c_scene_factor)
     # One gather over all 30 offsets keeps the traced graph small; offsets a pixel's own
     # (rho, lambda) excludes get weight 0.
@@ -140,8 +151,13 @@ def denoise_subpass(
     valid = jnp.expand_dims(valid, 2 - axis)  # (offsets, H, 1) or (offsets, 1, W)
     active = valid & (jnp.abs(i) <= rho) & (i % lam == 0)
     w = jnp.where(active, bilateral_weight(depth, z_q, pos, pos_q, delta, eps), 0)
-    total = C + jnp.sum(w[..., None] * C_q, axis=0)
-    weight = 1 + jnp.sum(w, axis=0)
+    # Weights reach 1 / eps: for a tiny eps, 31 of them overflow the sums (inf / inf). The
+    # filter is a ratio, so dividing every weight (the centre's 1 too) by the largest
+    # changes nothing else; with eps >= 1 (Alg. 4) that divisor is 1, exactly as before.
+    m = jax.lax.stop_gradient(jnp.maximum(1, jnp.max(w, axis=0)))
+    w = w / m
+    total = C / m[..., None] + jnp.sum(w[..., None] * C_q, axis=0)
+    weight = 1 / m + jnp.sum(w, axis=0)
     return total / weight[..., None]
 
 
@@ -156,7 +172,7 @@ def bilateral_denoise(
     eps=EPS_ALG4,
 ) -> Float[Array, "H W 3"]:
     """Separable adaptive cross-bilateral denoiser (seed 004 §3.3): x then y sub-pass, repeated."""
-    passes = check_int("passes", passes, 0, 64)
+    passes = static_int("bilateral_denoise", "passes", passes, 0, 64)
     for _ in range(passes):
         C = denoise_subpass(C, depth, pos, lum_l_min, 1, c_scene_factor, eps)
         C = denoise_subpass(C, depth, pos, lum_l_min, 0, c_scene_factor, eps)

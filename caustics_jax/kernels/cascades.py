@@ -20,8 +20,10 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._precision import float_inputs
-from ..arguments import check_int, check_real
-from ._util import as_float, check, check_last_axis, float_dtype
+from ._util import as_float, check, check_last_axis, concrete, float_dtype, safe_div, static_int, static_real
+
+#: Largest thread id of a dispatch: the GLSL port's `int tid` (and Alg. 1's arithmetic) is 32-bit.
+MAX_THREADS = 2**31 - 1
 
 
 @float_inputs("o", "l_dir", params=("z_near", "z_far"))
@@ -52,24 +54,52 @@ def cascade_projection(
     The printed bottom row reads `(far - near)/(far - near)` in the `z` column, which
     would map `near` to `near/(far - near) + 1`; the D3D matrix has `-near/(far - near)`
     there, which is what we use.
+
+    All six parameters may be traced. Outside jit, `far <= near`, a non-positive size and an
+    extent `max(w, h) s^level` beyond the dtype are refused; inside jit (unchecked) such
+    entries are 0, never inf.
     """
     check(width, "width", lower=0, strict=True)
     check(height, "height", lower=0, strict=True)
     check(s, "s", lower=1)
     check(level, "level", lower=0)
-    if np.any(np.asarray(far) <= np.asarray(near)):
-        raise ValueError(f"far must exceed near, got near={near}, far={far}")
+    n, f = concrete(near), concrete(far)
+    if n is not None and f is not None and np.any(f <= n):
+        raise ValueError(f"far must exceed near (in {jnp.dtype(dtype).name}), got near={n}, far={f}")
+    w, h = concrete(width), concrete(height)
+    if w is not None and h is not None:
+        _check_power_fits("cascade_projection", "the extent max(width, height) s^level",
+                          np.maximum(w, h), s, level, 1, dtype)
     scale = as_float(s, dtype) ** as_float(level, dtype)
     depth = as_float(far, dtype) - as_float(near, dtype)
     zero = jnp.zeros((), dtype)
     one = jnp.ones((), dtype)
     rows = [
-        [2 / (as_float(width, dtype) * scale), zero, zero, zero],
-        [zero, 2 / (as_float(height, dtype) * scale), zero, zero],
-        [zero, zero, 1 / depth, zero],
-        [zero, zero, -as_float(near, dtype) / depth, one],
+        [safe_div(2, as_float(width, dtype) * scale), zero, zero, zero],
+        [zero, safe_div(2, as_float(height, dtype) * scale), zero, zero],
+        [zero, zero, safe_div(1, jnp.maximum(depth, 0)), zero],
+        [zero, zero, safe_div(-as_float(near, dtype), jnp.maximum(depth, 0)), one],
     ]
     return jnp.stack([jnp.stack(r) for r in rows])
+
+
+def _check_power_fits(fn_name, what, factor, s, level, power, dtype) -> None:
+    """A ValueError naming `level` when a concrete `factor s^(power level)` exceeds the
+    largest finite number of `dtype` (compared in logarithms, which cannot overflow)."""
+    s, level = concrete(s), concrete(level)
+    if s is None or level is None or np.size(level) == 0 or np.size(s) == 0:
+        return
+    s = np.asarray(s, np.float64)
+    top = float(np.max(level))
+    log_max = np.log(float(jnp.finfo(dtype).max))
+    with np.errstate(divide="ignore"):
+        grows = np.log(np.asarray(factor, np.float64)) + power * top * np.log(s)
+    if np.any(grows > log_max):
+        s_max = float(np.max(s))
+        largest = int(np.floor((log_max - float(np.max(np.log(factor)))) / (power * np.log(s_max))))
+        raise ValueError(f"{fn_name}: level {top:g} makes {what} overflow {jnp.dtype(dtype).name} "
+                         f"(largest {float(jnp.finfo(dtype).max):.4g}); with s = {s_max:g} the level must "
+                         f"be at most {largest}")
 
 
 def ccm0_size(r_width, r_height, p) -> int:
@@ -78,7 +108,7 @@ def ccm0_size(r_width, r_height, p) -> int:
     256, 512, 1024 or 2048 (square) as `max(r.width, r.height) / p` is below 256, 512,
     1024, or not. Static configuration, so plain Python.
     """
-    r_width, r_height, p = (check_real(n, v, 0, lo_open=True) for n, v in
+    r_width, r_height, p = (static_real("ccm0_size", n, v, 0, lo_open=True) for n, v in
                             (("r_width", r_width), ("r_height", r_height), ("p", p)))
     ratio = max(r_width, r_height) / p
     for size in (256, 512, 1024):
@@ -93,8 +123,9 @@ def cascade_deltas(ccm0_x: int, ccm0_y: int, s: int) -> tuple[int, int]:
     Raises ValueError unless they are whole texels, which Alg. 1's integer arithmetic
     needs (e.g. power-of-two maps with `s` a power of two).
     """
-    ccm0_x, ccm0_y = check_int("ccm0_x", ccm0_x, 1, 2**16), check_int("ccm0_y", ccm0_y, 1, 2**16)
-    s = check_int("s", s, 2, 2**16)
+    ccm0_x = static_int("cascade_deltas", "ccm0_x", ccm0_x, 1, 2**16)
+    ccm0_y = static_int("cascade_deltas", "ccm0_y", ccm0_y, 1, 2**16)
+    s = static_int("cascade_deltas", "s", s, 2, 2**16)
     dx, dy = ccm0_x * (s - 1) / (2 * s), ccm0_y * (s - 1) / (2 * s)
     if dx != int(dx) or dy != int(dy) or ccm0_x % s or ccm0_y % s:
         raise ValueError(f"ccm0 {ccm0_x}x{ccm0_y} with s={s} gives fractional texels")
@@ -110,7 +141,7 @@ def cascade_thread_counts(ccm0_x: int, ccm0_y: int, s: int, n_levels: int) -> tu
     The total (eq. 5) is `sum(...)`; eq. 5 sums to `N` where levels run `0..N-1`.
     """
     cascade_deltas(ccm0_x, ccm0_y, s)
-    check_int("n_levels", n_levels, 1, 64)
+    n_levels = static_int("cascade_thread_counts", "n_levels", n_levels, 1, 64)
     ring = ccm0_x * ccm0_y - (ccm0_x // s) * (ccm0_y // s)
     return (ccm0_x * ccm0_y,) + (ring,) * (n_levels - 1)
 
@@ -124,10 +155,16 @@ def cascade_intensity_scale(
     A level-`c` texel covers `s^(2c)` level-0 texels, so this keeps the flux per unit
     area the same on every level. Alg. 3 lines 4-6 loop `for i = 0 to c`, which would
     give `s^(2(c+1))`; the test of flux conservation settles on eq. 7.
+
+    A level whose scale overflows `dtype` (float32, s = 2: above 63) is refused outside
+    jit; inside jit (unchecked) its scale is 0, like a masked lane.
     """
     check(s, "s", lower=1)
     check(level, "level", lower=0)
-    return as_float(s, dtype) ** (2 * jnp.asarray(level).astype(dtype))
+    _check_power_fits("cascade_intensity_scale", "s^(2 level)", 1.0, s, level, 2, dtype)
+    s, c = as_float(s, dtype), jnp.asarray(level).astype(dtype)
+    fits = jnp.isfinite(s ** (2 * c))
+    return jnp.where(fits, s ** jnp.where(fits, 2 * c, 0), 0)
 
 
 @float_inputs(ints=("tid",))
@@ -140,12 +177,24 @@ def cascade_dispatch(
     `W H (1 - 1/s^2)` threads laid out as the bottom band (`Region0 = W DeltaY`
     threads), the left and right bands (`2 DeltaX (H - 2 DeltaY)`, up to `Region1`) and
     the top band. `valid` is False past the last level (texel and level are then 0).
+
+    `ccm0_x`, `ccm0_y`, `s`, `n_levels` are static configuration (Python ints). Thread ids
+    are 32-bit on the GPU: a configuration of more than `2^31 - 1` threads is refused, and
+    `valid` is decided on `tid` as given (an int64 `2^33 + 1` is past the end, not 1).
     """
-    W, H = ccm0_x, ccm0_y
+    W = static_int("cascade_dispatch", "ccm0_x", ccm0_x, 1, 2**16)
+    H = static_int("cascade_dispatch", "ccm0_y", ccm0_y, 1, 2**16)
+    s = static_int("cascade_dispatch", "s", s, 2, 2**16)
+    n_levels = static_int("cascade_dispatch", "n_levels", n_levels, 1, 64)
     dx, dy = cascade_deltas(W, H, s)
     counts = cascade_thread_counts(W, H, s, n_levels)
-    tid = jnp.asarray(tid).astype(jnp.int32)
+    if sum(counts) > MAX_THREADS:
+        raise ValueError(f"cascade_dispatch: {W}x{H} maps with s={s} and {n_levels} levels need "
+                         f"{sum(counts)} threads, beyond int32 thread ids (2^31 - 1 = {MAX_THREADS})")
+    tid = jnp.asarray(tid)
+    tid = tid.astype(jnp.promote_types(tid.dtype, jnp.int32))  # room for the bounds below
     valid = (tid >= 0) & (tid < sum(counts))
+    tid = jnp.where(valid, tid, 0).astype(jnp.int32)
     ring = counts[-1] if n_levels > 1 else 1
     region0 = W * dy
     region1 = region0 + 2 * dx * (H - 2 * dy)

@@ -9,11 +9,12 @@ turns `I` into radiance; the temporal variant reuses the previous frame's points
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._precision import float_inputs
 from ..geometry import dot, safe_normalize
-from ._util import as_float, check, check_last_axis, float_dtype, safe_div, safe_sqrt
+from ._util import as_float, check, check_last_axis, float_dtype, ratio_scale, safe_div, safe_sqrt, tan_half
 
 #: Search radius cap of seed 000 §3.2 (5 mm, scene units in metres).
 RADIUS_CAP = 5e-3
@@ -34,14 +35,15 @@ def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array,
     """Spread angle of a primary ray cone (Akenine-Möller et al. 2021 §2, RTG1 ch. 20 eq. 30).
 
     `alpha = atan(2 tan(fov_y / 2) / H)`: the angle one pixel of a vertical field of view
-    `fov_y` (radians) over `H` pixels subtends at the eye.
+    `fov_y` (radians) over `H` pixels subtends at the eye. `fov_y` lies in `(0, pi)`; inside
+    jit (unchecked) a wider one is clipped below `pi`, where `alpha` tends to `pi / 2`.
     """
-    check(fov_y, "fov_y", lower=0, strict=True)
+    check(fov_y, "fov_y", lower=0, strict=True, upper=np.pi, upper_open=True)
     check(height_px, "height_px", lower=0, strict=True)
     fov_y = jnp.asarray(fov_y)
     dtype = float_dtype(fov_y)
     fov_y = fov_y.astype(dtype)
-    return jnp.arctan(2 * jnp.tan(fov_y / 2) / as_float(height_px, dtype))
+    return jnp.arctan(2 * tan_half(fov_y) / as_float(height_px, dtype))
 
 
 @float_inputs("width", "spread", "t", params=("surface_spread", "roughness_spread"))
@@ -59,13 +61,17 @@ def ray_cone_propagate(
     term comes from curvature; the roughness term widens the cone for glossy BSDFs
     (their §4). Both are angles supplied by the caller: the mapping from a BSDF
     roughness to an angle is the renderer's, not part of seed 000.
+
+    `spread` is a full cone angle in `[0, pi)` (a cone of `pi` or more has no width; `tan`
+    would turn negative); inside jit (unchecked) it is clipped below `pi`.
     """
     check(width, "width", lower=0)
+    check(spread, "spread", lower=0, upper=np.pi, upper_open=True)
     check(t, "t", lower=0)
     check(roughness_spread, "roughness_spread", lower=0)
     dtype = float_dtype(width, spread, t)
     width, spread, t = (jnp.asarray(a, dtype) for a in (width, spread, t))
-    new_width = width + 2 * t * jnp.tan(spread / 2)
+    new_width = width + 2 * t * tan_half(spread)
     new_spread = spread + as_float(surface_spread, dtype) + as_float(roughness_spread, dtype)
     return new_width, new_spread
 
@@ -93,14 +99,15 @@ def pixel_footprint_radius(
     `s = 2 t tan(spread / 2)` across the ray; on a surface whose normal makes angle
     `theta` with the ray it stretches to `s x s / |cos theta|`. The enclosing disk is its
     half-diagonal `(s / 2) sqrt(1 + 1 / cos^2 theta)`, then capped at `cap` (5 mm).
+    `spread` lies in `[0, pi)`, clipped below `pi` inside jit (as `ray_cone_propagate`).
     """
     check(t, "t", lower=0)
-    check(spread, "spread", lower=0)
+    check(spread, "spread", lower=0, upper=np.pi, upper_open=True)
     check(cap, "cap", lower=0, strict=True)
     dtype = float_dtype(t, spread, cos_theta)
     t, spread, cos_theta = (jnp.asarray(a, dtype) for a in (t, spread, cos_theta))
     c = jnp.maximum(jnp.abs(cos_theta), as_float(_MIN_COS, dtype))
-    half_side = t * jnp.tan(spread / 2)
+    half_side = t * tan_half(spread)
     r = half_side * jnp.sqrt(1 + c * c) / c
     return jnp.minimum(r, as_float(cap, dtype))
 
@@ -136,13 +143,19 @@ def in_cylinder(
     normal: Float[Array, "*batch 3"],
     radius: Float[Array, "*batch"],
 ) -> Bool[Array, "*batch"]:
-    """Whether `point` lies in the collection cylinder (seed 000 §3, "located within")."""
+    """Whether `point` lies in the collection cylinder (seed 000 §3, "located within").
+
+    Offset and radius are compared divided by their largest magnitude (`ratio_scale`), so
+    squares that leave the dtype (a float32 radius of 1e20) cannot decide the test.
+    """
     check_last_axis(point, "point", 3)
     check(radius, "radius", lower=0)
     dtype = float_dtype(point, center, normal, radius)
     d = jnp.asarray(point, dtype) - jnp.asarray(center, dtype)
     n = safe_normalize(jnp.asarray(normal, dtype))
     r = jnp.asarray(radius, dtype)
+    scale = ratio_scale(d, r)
+    d, r = d / scale[..., None], r / scale
     axial = dot(d, n)
     radial2 = dot(d, d) - axial * axial
     return (jnp.abs(axial) <= r * as_float(HEIGHT_FRACTION / 2, dtype)) & (radial2 <= r * r)
@@ -161,6 +174,8 @@ def reuse_accepted(
     """Reuse acceptance test (seed 000 eq. 4).
 
     `|p_prev - p| <= r` (the current point's radius), `n_prev . n >= 0.9`, same material.
+    The distance test compares squares of `d` and `r` divided by their largest magnitude,
+    which stay in range where `d . d` or `r^2` alone would underflow or overflow.
     """
     check_last_axis(p, "p", 3)
     check_last_axis(p_prev, "p_prev", 3)
@@ -168,6 +183,8 @@ def reuse_accepted(
     dtype = float_dtype(p_prev, n_prev, p, n, r)
     d = jnp.asarray(p_prev, dtype) - jnp.asarray(p, dtype)
     r = jnp.asarray(r, dtype)
+    scale = ratio_scale(d, r)
+    d, r = d / scale[..., None], r / scale
     close = dot(d, d) <= r * r
     aligned = dot(jnp.asarray(n_prev, dtype), jnp.asarray(n, dtype)) >= as_float(
         NORMAL_THRESHOLD, dtype
@@ -183,17 +200,26 @@ def reuse_weight(
 
     `w = exp(-|p - p_prev|^2 / (2 sigma^2))`. At `r = 0` the kernel degenerates to a
     delta: weight 1 at coincident points, else 0.
+
+    `d` and `sigma` are divided by their largest magnitude before squaring (`d . d` or
+    `sigma^2` alone under- or overflow: float32 `r = |d| = 1e20` gave inf/inf), and the
+    exponent is cut where `exp` underflows anyway (beyond `-log(tiny)`: 87 in float32), so
+    the division stays well conditioned and the gradient finite.
     """
     check_last_axis(p, "p", 3)
     check(r, "r", lower=0)
     dtype = float_dtype(p_prev, p, r)
     d = jnp.asarray(p_prev, dtype) - jnp.asarray(p, dtype)
-    d2 = dot(d, d)
     sigma = as_float(SIGMA_FRACTION, dtype) * jnp.asarray(r, dtype)
+    scale = ratio_scale(d, sigma)
+    d, sigma = d / scale[..., None], sigma / scale
+    d2 = dot(d, d)
     two_sigma2 = 2 * sigma * sigma
-    ok = two_sigma2 > 0
-    w = jnp.exp(-d2 / jnp.where(ok, two_sigma2, 1))
-    return jnp.where(ok, w, jnp.where(d2 == 0, 1, 0).astype(dtype))
+    # max(sigma, |d_i|) = 1 after scaling, so unless both are 0 two_sigma2 >= d2 / x_max >= 1 / x_max
+    x_max = as_float(-np.log(np.finfo(dtype).tiny), dtype)
+    far = d2 > x_max * two_sigma2  # also r = 0 with d != 0: the delta kernel's 0
+    ok = ~far & (two_sigma2 > 0)
+    return jnp.where(far, 0, jnp.exp(-d2 / jnp.where(ok, two_sigma2, 1))).astype(dtype)
 
 
 @float_inputs("tau", "intensity", "r")
@@ -247,8 +273,12 @@ def gather_previous(
     """
     for name, a, k in (("p", p, 3), ("n", n, 3), ("p_prev", p_prev, 3), ("n_prev", n_prev, 3)):
         check_last_axis(a, name, k)
-    if jnp.shape(L_prev)[:1] != jnp.shape(p_prev)[:1]:
-        raise ValueError(f"L_prev leading axis {jnp.shape(L_prev)} != p_prev {jnp.shape(p_prev)}")
+    for rows, ref, others in (("p", p, dict(n=n, m=m, r=r)),
+                              ("p_prev", p_prev, dict(n_prev=n_prev, m_prev=m_prev, r_prev=r_prev, L_prev=L_prev))):
+        for name, a in others.items():
+            if jnp.shape(a)[:1] != jnp.shape(ref)[:1]:
+                raise ValueError(f"gather_previous: {name} must have one row per point of {rows} "
+                                 f"({jnp.shape(ref)[0]}), got shape {jnp.shape(a)}")
     dtype = float_dtype(p, n, r, p_prev, n_prev, r_prev, L_prev)
     cur = lambda a: jnp.asarray(a)[:, None]  # noqa: E731  (current points along axis 0)
     prev = lambda a: jnp.asarray(a)[None, :]  # noqa: E731

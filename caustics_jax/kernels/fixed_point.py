@@ -18,8 +18,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, UInt32
 
 from .._precision import float_inputs
-from ..arguments import check_int
-from ._util import check
+from ._util import check, static_int
 
 FRACTION_BITS = 28
 SCALE = 2**FRACTION_BITS
@@ -65,7 +64,12 @@ def fixed_point_encode(x: Float[Array, "*batch"]) -> UInt32[Array, "*batch"]:
 
 @float_inputs(ints=("code",), dtype_arg="dtype")
 def fixed_point_decode(code: UInt32[Array, "*batch"], dtype=jnp.float32) -> Float[Array, "*batch"]:
-    """Unsigned 4.28 fixed point to float of `dtype` (seed 000 §3.2)."""
+    """Unsigned 4.28 fixed point to float of `dtype` (seed 000 §3.2).
+
+    `code` holds 32-bit words: outside jit a value outside `[0, 2^32 - 1]` is refused (the
+    cast to `uint32` would wrap it: -1 decoded as 16).
+    """
+    check(code, "code", lower=0, upper=2**32 - 1)
     code = jnp.asarray(code, dtype=jnp.uint32)
     return code.astype(dtype) * jnp.asarray(RESOLUTION, dtype)
 
@@ -84,7 +88,7 @@ def fixed_point_accumulate(
     by summing the four bytes of every code separately, which is exact in 32-bit
     arithmetic for up to 2^24 addends per segment, and propagating the carries.
     """
-    num_segments = check_int("num_segments", num_segments, 1, 2**24)
+    num_segments = static_int("fixed_point_accumulate", "num_segments", num_segments, 1, 2**24)
     x = jnp.asarray(x)
     if x.ndim != 1:
         raise ValueError(f"x must be 1-D, got shape {x.shape}")

@@ -13,7 +13,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._precision import float_inputs
 from ..geometry import dot
-from ._util import check_last_axis, float_dtype, safe_div, safe_sqrt
+from ._util import check_last_axis, float_dtype, ratio_scale, safe_div, safe_sqrt
 
 
 @float_inputs("pos_water", "pos_terrain", "dir_refraction")
@@ -27,12 +27,15 @@ def projected_photon_position(
     `PosWater + ((PosTerrain - PosWater) . D) / |D|^2 D`: the orthogonal projection of
     the terrain point onto the refracted ray. `D = 0` (total internal reflection, which
     `refract` reports as the zero vector) returns `PosWater`; the thesis drops such photons.
+    Only the direction of `D` matters: it is divided by its largest component first, so
+    `D . D` cannot underflow (float32 `|D| = 1e-20` had left the photon at `PosWater`).
     """
     check_last_axis(pos_water, "pos_water", 3)
     check_last_axis(pos_terrain, "pos_terrain", 3)
     check_last_axis(dir_refraction, "dir_refraction", 3)
     dtype = float_dtype(pos_water, pos_terrain, dir_refraction)
     W, T, D = (jnp.asarray(a, dtype) for a in (pos_water, pos_terrain, dir_refraction))
+    D = D / ratio_scale(D, 0)[..., None]
     s = safe_div(dot(T - W, D), dot(D, D))
     return W + s[..., None] * D
 
@@ -51,7 +54,9 @@ def ray_plane_intersection(
     `t = ((plane_point - origin) . n) / (direction . n)`; `hit` is False for a ray
     parallel to the plane or a plane behind the origin (`t < 0`), where `point = origin`.
     "Parallel" means `|direction . n| <= 4 eps |direction| |n|`: below that the cosine is
-    rounding noise and `t` would be meaningless.
+    rounding noise and `t` would be meaningless. `direction` and `plane_normal` are divided
+    by their largest components first, so that test and the intersection hold for any
+    length of either (float32 `|d| = |n| = 1e20` had overflowed `|d| |n|`: no hit).
     """
     for name, a in (("origin", origin), ("direction", direction)):
         check_last_axis(a, name, 3)
@@ -59,10 +64,12 @@ def ray_plane_intersection(
     check_last_axis(plane_normal, "plane_normal", 3)
     dtype = float_dtype(origin, direction, plane_point, plane_normal)
     o, d, q, n = (jnp.asarray(a, dtype) for a in (origin, direction, plane_point, plane_normal))
+    length = ratio_scale(d, 0)
+    d, n = d / length[..., None], n / ratio_scale(n, 0)[..., None]
     den = dot(d, n)
     noise = 4 * jnp.finfo(dtype).eps * safe_sqrt(dot(d, d) * dot(n, n))
     crosses = jnp.abs(den) > noise
-    t = safe_div(dot(q - o, n), jnp.where(crosses, den, 0))
+    t = safe_div(dot(q - o, n), jnp.where(crosses, den, 0))  # in units of the scaled d
     hit = crosses & (t >= 0)
     t = jnp.where(hit, t, 0)
-    return o + t[..., None] * d, t, hit
+    return o + t[..., None] * d, t / length, hit

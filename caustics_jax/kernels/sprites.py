@@ -13,9 +13,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._precision import float_inputs
-from ..arguments import check_int, check_real
 from ..geometry import dot, safe_normalize
-from ._util import as_float, check, check_last_axis, float_dtype, safe_div
+from ._util import as_float, check, check_last_axis, float_dtype, safe_div, static_int, static_real, tiny
 
 #: Eq. 19's epsilon ("a small offset value"); the paper gives no number.
 FORESHORTENING_EPS = 1e-3
@@ -29,13 +28,15 @@ def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*bat
 
     `q = sqrt(r.width / (ccm0.x - 1) * r.height / (ccm0.y - 1)) q0 sigma`: the caustic-map
     texel spacing of the light's range, times the user scale `q0` and the compression
-    ratio `sigma`.
+    ratio `sigma`. The light range `r_width`, `r_height` and the map size `ccm0_x`,
+    `ccm0_y` are static configuration (Python numbers); `q0` and `sigma` may be traced.
     """
     check(sigma, "sigma", lower=0)
     check(q0, "q0", lower=0)
-    r_width = check_real("r_width", r_width, 0, lo_open=True)
-    r_height = check_real("r_height", r_height, 0, lo_open=True)
-    ccm0_x, ccm0_y = check_int("ccm0_x", ccm0_x, 2, 2**16), check_int("ccm0_y", ccm0_y, 2, 2**16)
+    r_width = static_real("sprite_size", "r_width", r_width, 0, lo_open=True)
+    r_height = static_real("sprite_size", "r_height", r_height, 0, lo_open=True)
+    ccm0_x = static_int("sprite_size", "ccm0_x", ccm0_x, 2, 2**16)
+    ccm0_y = static_int("sprite_size", "ccm0_y", ccm0_y, 2, 2**16)
     sigma = jnp.asarray(sigma)
     dtype = float_dtype(sigma)
     spacing = (r_width / (ccm0_x - 1) * r_height / (ccm0_y - 1)) ** 0.5
@@ -49,13 +50,14 @@ def sprite_foreshortening(
     """Stretch `a = 1 / (-l_dir . n' + eps)` along the light (seed 004 eq. 19).
 
     The cosine is clamped at 0: Alg. 3 line 33 only splats front-facing hits, and a
-    negative cosine would flip the patch.
+    negative cosine would flip the patch. Inside jit (unchecked) `eps` is floored at the
+    dtype's smallest normal number, so `a` stays finite.
     """
     check_last_axis(l_dir, "l_dir", 3)
     check(eps, "eps", lower=0, strict=True)
     dtype = float_dtype(l_dir, n_hit)
     cos = jnp.maximum(-dot(jnp.asarray(l_dir, dtype), jnp.asarray(n_hit, dtype)), 0)
-    return 1 / (cos + as_float(eps, dtype))
+    return 1 / (cos + jnp.maximum(as_float(eps, dtype), tiny(dtype)))
 
 
 @float_inputs("l_dir", "n_hit")

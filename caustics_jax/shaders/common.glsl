@@ -318,10 +318,19 @@ float cj_path_irradiance(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float et
 
 // Cross-bilateral weight w = w_z w_pos (seed 004 eq. 21-23; kernels.bilateral.bilateral_weight):
 // w_z = 1 / (|z_p - z_q| + eps) (eq. 22; Alg. 4 line 22 uses eps = 1),
-// w_pos = 1 / (1 + 10 d.d / delta^2), d = pos_p - pos_q (eq. 23).
+// w_pos = 1 / (1 + 10 d.d / delta^2), d = pos_p - pos_q (eq. 23), evaluated as
+// delta'^2 / (delta'^2 + 10 d'.d') with d and delta divided by their largest magnitude m:
+// delta^2 alone underflows (delta = 1e-23, p = q: 0/0) or overflows (delta = |d| = 1e30).
 float cj_bilateral_weight(float z_p, float z_q, vec3 pos_p, vec3 pos_q, float delta, float eps) {
     vec3 d = pos_p - pos_q;
     float w_z = 1.0 / (abs(z_p - z_q) + eps);
-    float w_pos = 1.0 / (1.0 + 10.0 * dot(d, d) / (delta * delta));
+    float m = max(abs(delta), max(abs(d.x), max(abs(d.y), abs(d.z))));
+    if (m > 0.0) {
+        d /= m;
+        delta /= m;
+    }
+    float delta2 = delta * delta;
+    float den = delta2 + 10.0 * dot(d, d);  // in [1, 11] unless delta = d = 0
+    float w_pos = den > 0.0 ? delta2 / den : 1.0;
     return w_z * w_pos;
 }

@@ -2,7 +2,7 @@
 // underwater attenuation tent I_att (eq. 13): x = 1 - clamp(t, 0, t_max) / t_max,
 // 1 - (x - gamma)/(1 - gamma) if x > gamma else 1 - (gamma - x)/gamma; and the Schlick-like
 // Fresnel term F_refl = F_frac + (1 - F_frac)(1 - cos)^F_exp, cos = clamp(-l.n, 0, 1) (eq. 14),
-// F_refr = 1 - F_refl (eq. 15), the F of a refracted photon.
+// F_refr = 1 - F_refl (eq. 15), the F of a refracted photon; 0^F_exp is its limit (1 for F_exp = 0).
 float cj_intensity_attenuation(float t, float t_max, float gamma) {
     float x = 1.0 - clamp(t, 0.0, t_max) / t_max;
     return x > gamma ? 1.0 - (x - gamma) / (1.0 - gamma) : 1.0 - (gamma - x) / gamma;
@@ -10,7 +10,10 @@ float cj_intensity_attenuation(float t, float t_max, float gamma) {
 
 float cj_fresnel_reflect_approx(vec3 l_dir, vec3 n, float f_frac, float f_exp) {
     float c = clamp(-dot(l_dir, n), 0.0, 1.0);
-    return f_frac + (1.0 - f_frac) * pow(1.0 - c, f_exp);
+    // pow(0, y) is undefined in GLSL for y <= 0: at normal incidence take the limit
+    float base = 1.0 - c;
+    float power = base > 0.0 ? pow(base, f_exp) : (f_exp == 0.0 ? 1.0 : 0.0);
+    return f_frac + (1.0 - f_frac) * power;
 }
 
 void cj_run(inout Record r) {

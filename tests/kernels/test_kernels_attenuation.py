@@ -115,3 +115,37 @@ def test_bad_parameters_raise():
         intensity_attenuation(jnp.ones(3), 0.0)
     with pytest.raises(ValueError, match="f_frac"):
         fresnel_reflect_approx(jnp.asarray([0.0, 0, -1]), jnp.asarray([0.0, 0, 1]), 1.5)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_fresnel_gradient_is_finite_at_normal_incidence_for_any_exponent(dtype):
+    """(1 - cos)^F_exp at cos = 1: d/dcos is F_exp 0^(F_exp - 1) (inf for F_exp < 1) and
+    d/dF_exp is 0^F_exp log 0; both had come out NaN/inf. The value stays F_frac (1 if F_exp = 0)."""
+    import jax
+
+    n = jnp.asarray([0.0, 0, 1], dtype)
+    f_exp = jnp.asarray([0.0, 0.5, 1.0, 5.0], dtype)
+
+    def F(l_dir, e):
+        return fresnel_reflect_approx(l_dir, n, 0.02, e)
+
+    value = jax.jit(jax.vmap(F, (None, 0)))(-n, f_exp)
+    np.testing.assert_array_equal(np.asarray(value), np.asarray([1.0, 0.02, 0.02, 0.02], dtype))
+    g_l, g_e = jax.jit(jax.vmap(jax.grad(F, argnums=(0, 1)), (None, 0)))(-n, f_exp)
+    assert bool(jnp.all(jnp.isfinite(g_l))) and bool(jnp.all(jnp.isfinite(g_e)))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_subnormal_t_max_and_gamma_are_refused_and_zero_ones_stay_finite_inside_jit(dtype):
+    """float32 t_max = 1e-45 passed `> 0` and gave NaN (XLA flushes it to zero: 0/0)."""
+    import jax
+
+    sub = float(np.finfo(dtype).tiny) / 4
+    t = jnp.asarray([0.0, 0.5, 1.0], dtype)
+    with pytest.raises(ValueError, match="t_max"):
+        intensity_attenuation(t, sub)
+    with pytest.raises(ValueError, match="gamma"):
+        intensity_attenuation(t, 1.0, gamma=sub)
+    out = jax.jit(lambda t_max, g: intensity_attenuation(t, t_max, g))(
+        jnp.asarray([0.0, 1.0, 1.0], dtype), jnp.asarray([0.5, 0.0, 1.0], dtype))
+    assert bool(jnp.all(jnp.isfinite(out)))

@@ -201,3 +201,75 @@ def test_luminance_and_shapes():
         denoise_subpass(jnp.ones((4, 4, 3)), jnp.ones((4, 5)), jnp.ones((4, 4, 3)), 1.0)
     with pytest.raises(ValueError, match="delta"):
         bilateral_weight(0.0, 1.0, jnp.zeros(3), jnp.ones(3), 0.0)
+
+
+# Scales of delta and |p - q| together: the weight of eq. 23 depends on their ratio only.
+SCALES = {jnp.float32: [1e-30, 1e-23, 1e-19, 1.0, 1e19, 1e30],
+          jnp.float64: [1e-300, 1e-160, 1.0, 1e160, 1e300]}
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_weight_depends_on_the_ratio_of_distance_to_delta_at_any_scale(dtype):
+    """`1 / (1 + 10 k^2)` for `|p - q| = k delta`, whatever delta, with finite gradients.
+
+    As `d.d / delta^2` (before the fix) float32 gave NaN at delta = 1e-30 and 1e-23 with
+    p = q (delta^2 underflows: 0/0) and at delta = |p - q| = 1e30 (inf/inf)."""
+    scale = np.repeat(SCALES[dtype], 4)
+    k = np.tile([0.0, 0.5, 1.0, 3.0], len(SCALES[dtype]))
+    pos_q = np.stack([k * scale, 0 * k, 0 * k], -1)
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+
+    def w_of(delta, q):
+        return bilateral_weight(c(2.0), c(2.0), c(np.zeros(3)), q, delta)
+
+    w = np.asarray(jax.jit(w_of)(c(scale), c(pos_q)))
+    # measured max relative error 1.9e-7 (float32), 1.9e-16 (float64): a few roundings
+    np.testing.assert_allclose(w, 1 / (1 + 10 * k**2), rtol=4 * EPS[dtype])
+    grads = jax.jit(jax.grad(lambda d, q: jnp.sum(w_of(d, q)), argnums=(0, 1)))(c(scale), c(pos_q))
+    assert all(bool(jnp.all(jnp.isfinite(g))) for g in grads)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_a_delta_or_eps_below_the_smallest_normal_number_is_refused(dtype):
+    """Subnormal parameters are flushed to zero by XLA: 1 / eps would be inf."""
+    sub = np.finfo(dtype).tiny / 4
+    z3 = jnp.zeros(3, dtype)
+    with pytest.raises(ValueError, match="delta"):
+        bilateral_weight(jnp.asarray(1.0, dtype), 1.0, z3, z3, jnp.asarray(sub, dtype))
+    with pytest.raises(ValueError, match="eps"):
+        bilateral_weight(jnp.asarray(1.0, dtype), 1.0, z3, z3, jnp.asarray(1.0, dtype), eps=sub)
+
+
+def test_inside_jit_a_zero_delta_or_eps_gives_finite_weights():
+    """Not checked on tracers: delta = 0 is the limit (1 at p = q, else 0), eps is floored."""
+    z3 = jnp.zeros(3, jnp.float32)
+    w = jax.jit(lambda d, e: bilateral_weight(jnp.float32(1.0), 1.0, z3, jnp.asarray([[0, 0, 0], [1.0, 0, 0]]),
+                                              d, e))(jnp.float32(0), jnp.float32(0))
+    assert bool(jnp.all(jnp.isfinite(w))) and float(w[1]) == 0
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_a_tiny_eps_does_not_overflow_the_denoiser_sums(dtype):
+    """eps = 2 tiny makes w(p, p) = 1 / (2 tiny); 31 such weights overflowed the sums (NaN)."""
+    eps = 2 * float(np.finfo(dtype).tiny)
+    H, W = 2, 8
+    depth = jnp.full((H, W), 5.0, dtype)
+    pos = jnp.zeros((H, W, 3), dtype)
+    C = jnp.ones((H, W, 3), dtype)
+    out = np.asarray(denoise_subpass(C, depth, pos, 1.0, eps=eps))
+    np.testing.assert_allclose(out, 1.0, rtol=8 * EPS[dtype])
+
+
+@pytest.mark.parametrize("shape", [(0, 4), (4, 0), (0, 0)])
+def test_an_empty_image_gives_an_empty_result(shape):
+    C, depth = jnp.zeros((*shape, 3)), jnp.zeros(shape)
+    assert denoise_subpass(C, depth, C, 1.0, axis=1).shape == (*shape, 3)
+    assert bilateral_denoise(C, depth, C, 1.0).shape == (*shape, 3)
+
+
+def test_static_arguments_given_a_tracer_are_a_value_error_naming_them():
+    C, depth = jnp.ones((2, 2, 3)), jnp.ones((2, 2))
+    with pytest.raises(ValueError, match="axis.*static"):
+        jax.jit(lambda a: denoise_subpass(C, depth, C, 1.0, axis=a))(1)
+    with pytest.raises(ValueError, match="passes.*static"):
+        jax.jit(lambda n: bilateral_denoise(C, depth, C, 1.0, passes=n))(1)

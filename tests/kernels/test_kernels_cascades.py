@@ -208,3 +208,52 @@ def test_ccm0_size_thresholds_and_bad_configurations_raise():
         cascade_deltas(20, 20, 3)
     with pytest.raises(ValueError):
         cascade_projection(1.0, 1.0, 5.0, 1.0, 2, 0)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_projection_traces_inside_a_users_jit(dtype):
+    """Its far > near check had called np.asarray on the tracers (TracerArrayConversionError).
+    Inside jit, unchecked, far <= near or a zero width give a finite matrix (0 there)."""
+    args = (3.0, 2.0, 0.5, 10.0, 2.0, 1.0)
+    P = jax.jit(lambda *a: cascade_projection(*a, dtype=dtype))(*args)
+    np.testing.assert_array_equal(np.asarray(P), np.asarray(cascade_projection(*args, dtype=dtype)))
+    bad = jax.jit(lambda *a: cascade_projection(*a, dtype=dtype))(0.0, 2.0, 5.0, 5.0, 2.0, 1.0)
+    assert bool(jnp.all(jnp.isfinite(bad)))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_scales_the_dtype_cannot_hold_are_refused_and_masked_inside_jit(dtype):
+    """s^(2c) of eq. 7 and the extent w s^c of eq. 2 overflowed to inf / a zero row."""
+    big = 100 if dtype == jnp.float32 else 600  # 2^200 > float32 max, 2^1200 > float64 max
+    with pytest.raises(ValueError, match="level"):
+        cascade_intensity_scale(np.array([0, big]), 2, dtype)
+    with pytest.raises(ValueError, match="level"):
+        cascade_projection(1.0, 1.0, 0.0, 1.0, 2.0, 2 * big, dtype)
+    # the largest level that fits is accepted, and exact
+    top = (np.finfo(dtype).maxexp - 1) // 2  # 2^(2 top) <= 2^(maxexp - 1), below the largest float
+    assert float(cascade_intensity_scale(np.array([top]), 2, dtype)[0]) == 2.0 ** (2 * top)
+    inside = jax.jit(lambda c: cascade_intensity_scale(c, 2, dtype))(jnp.asarray([1, big]))
+    np.testing.assert_array_equal(np.asarray(inside), [4.0, 0.0])
+
+
+def test_dispatch_refuses_configurations_past_int32_thread_ids():
+    """32768^2 maps with 3 levels have 2.7e9 threads: an OverflowError had escaped."""
+    with pytest.raises(ValueError, match="int32"):
+        cascade_dispatch(np.array([0]), 32768, 32768, 2, 3)
+    texel, level, valid = cascade_dispatch(np.array([0, 2**31 - 1]), 32768, 32768, 2, 2)
+    assert list(np.asarray(valid)) == [True, False]
+
+
+def test_dispatch_marks_thread_ids_past_int32_invalid_without_wrapping():
+    """An int64 tid = 2^33 + 1 had wrapped to 1: texel (1, 0), valid."""
+    tid = np.array([2**33 + 1, 2**32, -(2**32) + 5, 27, 28], np.int64)  # 28 threads in 4x4, s=2, N=2
+    texel, level, valid = cascade_dispatch(tid, 4, 4, 2, 2)
+    assert list(np.asarray(valid)) == [False, False, False, True, False]
+    assert not np.asarray(texel)[[0, 1, 2, 4]].any() and not np.asarray(level)[[0, 1, 2, 4]].any()
+
+
+def test_static_configuration_given_a_tracer_is_a_value_error_naming_it():
+    for name, fn in (("ccm0_x", lambda v: cascade_dispatch(jnp.arange(4), v, 4, 2, 2)),
+                     ("n_levels", lambda v: cascade_dispatch(jnp.arange(4), 4, 4, 2, v))):
+        with pytest.raises(ValueError, match=f"{name}.*static"):
+            jax.jit(fn)(4 if name == "ccm0_x" else 2)

@@ -346,3 +346,69 @@ def test_bad_inputs_raise():
         temporal_ema(1.0, 2.0, alpha=1.5)
     with pytest.raises(ValueError, match="r"):
         resolve(1.0, 1.0, -1e-3)
+
+
+# A radius and the distances compared with it, scaled together: the Gaussian of eq. 3, the
+# test of eq. 4 and the cylinder depend on their ratios only.
+SCALES = {jnp.float32: [1e-30, 1e-19, 1.0, 1e19, 1e30], jnp.float64: [1e-300, 1e-160, 1.0, 1e160, 1e300]}
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_reuse_weight_acceptance_and_cylinder_depend_on_ratios_at_any_scale(dtype):
+    """Before: float32 `reuse_weight` was NaN at r = |d| = 1e20 (inf/inf) and 1 instead of
+    exp(-8/9) at r = |d| = 1e-19 (d.d underflows); `reuse_accepted` took |d| = 10 r at
+    1e20 (both squares inf); `in_cylinder` failed the same way."""
+    scales = np.repeat(SCALES[dtype], 4)
+    k = np.tile([0.0, 0.5, 1.0, 2.0], len(SCALES[dtype]))  # |d| / r
+    r = 1.0 * scales
+    d = np.stack([k * scales * 0.6, k * scales * 0.8, 0 * k], -1)  # in the cylinder's plane
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    z3, up = c(np.zeros(3)), c([0.0, 0, 1])
+
+    def run(d, r):
+        return (reuse_weight(d, z3, r), reuse_accepted(d, up, 0, z3, up, 0, r * 0.999),
+                in_cylinder(d, z3, up, r * 0.999))
+
+    w, acc, inside = jax.jit(run)(c(d), c(r))
+    x = k**2 / (2 * 0.75**2)
+    # exp amplifies the exponent's rounding x-fold: measured max relative error
+    # 0.79 eps (1 + x) in float32, 0.96 eps (1 + x) in float64 (4.3e-7 and 9.7e-16)
+    rel = np.abs(np.asarray(w) - np.exp(-x)) / np.exp(-x)
+    assert np.all(rel <= 2 * EPS[dtype] * (1 + x))
+    np.testing.assert_array_equal(np.asarray(acc), k <= 0.999)
+    np.testing.assert_array_equal(np.asarray(inside), k <= 0.999)
+    g = jax.jit(jax.grad(lambda d, r: jnp.sum(reuse_weight(d, z3, r)), argnums=(0, 1)))(c(d), c(r))
+    assert all(bool(jnp.all(jnp.isfinite(x))) for x in g)
+
+
+def test_gather_refuses_arrays_of_mismatched_lengths_naming_them():
+    z, up = np.zeros((2, 3)), np.tile([0.0, 0, 1], (2, 1))
+    ok = dict(p=z, n=up, m=np.zeros(2, int), r=np.ones(2), p_prev=z, n_prev=up, m_prev=np.zeros(2, int),
+              r_prev=np.ones(2), L_prev=np.ones((2, 3)))
+    for name, bad in (("r_prev", np.ones(3)), ("m_prev", np.zeros(1, int)), ("n_prev", up[:1]),
+                      ("r", np.ones(3)), ("m", np.zeros(1, int)), ("n", up[:1])):
+        with pytest.raises(ValueError, match=f"gather_previous: {name} "):
+            gather_previous(**{**ok, name: bad})
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_angles_of_pi_or_more_are_refused_and_inside_jit_give_no_negative_width(dtype):
+    """A cone of full angle >= pi has no width: tan(angle / 2) had turned negative
+    (float32 fov = pi gave alpha = -1.57, spread = 4 a width of -3.4)."""
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    for angle in (np.pi, 4.0):
+        with pytest.raises(ValueError, match="fov_y"):
+            pixel_spread_angle(c(angle), 100)
+        with pytest.raises(ValueError, match="spread"):
+            ray_cone_propagate(c(1.0), c(angle), c(1.0))
+        with pytest.raises(ValueError, match="spread"):
+            pixel_footprint_radius(c(1.0), c(angle), c(1.0))
+    angles = c([np.pi, 4.0, 2 * np.pi, 7.0])
+
+    def run(a):
+        return (pixel_spread_angle(a, 100), ray_cone_propagate(c(1.0), a, c(1.0))[0],
+                pixel_footprint_radius(c(1.0), a, c(1.0), cap=1e30))
+
+    alpha, width, radius = (np.asarray(x) for x in jax.jit(run)(angles))
+    assert np.all((alpha >= 1.5) & (alpha <= np.pi / 2))  # the limit of a widening fov
+    assert np.all(np.isfinite(width) & (width > 1e6)) and np.all(np.isfinite(radius) & (radius > 1e6))

@@ -94,3 +94,16 @@ def test_negative_values_and_bad_segments_raise():
         fixed_point_encode(jnp.asarray([0.1, -1e-3]))
     with pytest.raises(ValueError, match="segment_ids"):
         fixed_point_accumulate(jnp.ones(3), jnp.asarray([0, 1, 2]), num_segments=2)
+
+
+def test_codes_outside_32_bits_are_refused_not_wrapped():
+    """An int64 code 2^33 had decoded as 0, and -1 as 16 (wrapped to 2^32 - 1)."""
+    for code in (np.array([2**33]), np.array([-1]), np.array([2**32])):
+        with pytest.raises(ValueError, match="code"):
+            fixed_point_decode(code)
+    assert float(fixed_point_decode(np.array([2**32 - 1]))[0]) == pytest.approx(16.0)
+
+
+def test_num_segments_given_a_tracer_is_a_value_error_naming_it():
+    with pytest.raises(ValueError, match="num_segments.*static"):
+        jax.jit(lambda k: fixed_point_accumulate(jnp.ones(3), jnp.zeros(3, jnp.int32), k))(2)

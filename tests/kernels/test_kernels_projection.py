@@ -91,3 +91,23 @@ def test_projection_is_exact_when_the_light_enters_along_the_water_normal(dtype,
 def test_wrong_shapes_raise():
     with pytest.raises(ValueError, match="dir_refraction"):
         projected_photon_position(jnp.zeros(3), jnp.zeros(3), jnp.zeros(2))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_the_length_of_the_direction_and_normal_does_not_matter(dtype):
+    """Eq. 3.3 and the plane hit depend on the directions of D and n only. As D.D and
+    |d| |n| (before the fix), float32 |D| = 1e-20 underflowed (the photon stayed at
+    PosWater), |D| = 1e20 overflowed (same), and |d| = |n| = 1e20 called every ray parallel."""
+    lengths = {jnp.float32: [1e-30, 1e-20, 1.0, 1e20, 1e30], jnp.float64: [1e-300, 1e-160, 1.0, 1e160, 1e300]}
+    s = np.asarray(lengths[dtype])[:, None]
+    c = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    W, T, D = np.zeros(3), np.array([1.0, 0, -2]), np.array([0.6, 0, -0.8])
+    got = np.asarray(projected_photon_position(c(W), c(T), c(D * s)))
+    want = np.asarray(projected_photon_position(c(W), c(T), c(D)))
+    np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=4 * EPS[dtype], atol=0)
+    n = np.array([0.0, 0.6, 0.8])
+    point, t, hit = ray_plane_intersection(c(W), c(D * s), c([0.0, 0, -2]), c(n * s))
+    assert bool(jnp.all(hit))
+    p1, _, _ = ray_plane_intersection(c(W), c(D), c([0.0, 0, -2]), c(n))
+    np.testing.assert_allclose(np.asarray(point), np.broadcast_to(np.asarray(p1), point.shape),
+                               rtol=4 * EPS[dtype], atol=0)

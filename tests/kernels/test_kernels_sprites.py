@@ -147,3 +147,20 @@ def test_foreshortening_is_bounded_and_one_over_cosine(dtype, seed):
         lambda l: sprite_intensity(1.0, sprite_foreshortening(l, jnp.asarray(nrm[0], dtype)), 0.0)
     )
     assert bool(jnp.all(jnp.isfinite(g(jnp.asarray(l_dir[0], dtype)))))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_a_subnormal_eps_is_refused_and_a_zero_one_stays_finite_inside_jit(dtype):
+    """float32 eps = 1e-45 had given a = inf at grazing light (1 / eps, flushed to 0)."""
+    l_dir, n = jnp.asarray([0.0, 0, -1], dtype), jnp.asarray([1.0, 0, 0], dtype)
+    with pytest.raises(ValueError, match="eps"):
+        sprite_foreshortening(l_dir, n, eps=float(np.finfo(dtype).tiny) / 4)
+    a = jax.jit(lambda e: sprite_foreshortening(l_dir, n, e))(jnp.asarray(0.0, dtype))
+    assert bool(jnp.isfinite(a))
+
+
+def test_static_map_configuration_given_a_tracer_is_a_value_error_naming_it():
+    with pytest.raises(ValueError, match="r_width.*static"):
+        jax.jit(lambda w: sprite_size(w, 1.0, 256, 256, 1.0, jnp.ones(2)))(1.0)
+    with pytest.raises(ValueError, match="ccm0_x.*static"):
+        jax.jit(lambda c: sprite_size(1.0, 1.0, c, 256, 1.0, jnp.ones(2)))(256)
