@@ -113,9 +113,12 @@ def plot(report: dict, path: Path) -> None:
 def check_output_file(flag: str, path) -> None:
     """Refuse, before any work, an output file that could not be written after the run: a
     directory, a path below a file, or one in a directory that cannot be written
-    (nothing is created here). `None` or "none": no file."""
+    (nothing is created here). `None` or "none": no file; "" is refused (`Path("")` is the
+    current directory)."""
     if path is None or path == "none":
         return
+    if not str(path):
+        raise ValueError(f"{flag} must name a file, got an empty path (leave {flag} out to write none)")
     p = Path(path).expanduser()
     if p.is_dir():
         raise ValueError(f"{flag} {path} is a directory; give a file path, e.g. {p / 'out'}")
@@ -243,7 +246,7 @@ def _selection(named, everything) -> list[str] | None:
         return None
     if named == ["none"]:
         return []
-    return list(everything) if named == ["all"] else named
+    return list(everything) if named == ["all"] else list(dict.fromkeys(named))  # a name given twice: once
 
 
 #: Largest std430 binary per kernel: a Vulkan storage buffer addresses at most 2^32 bytes
@@ -301,6 +304,9 @@ def _export(args) -> int:
 def _conformance(args) -> int:
     from .shaders import conformance
 
+    if not args.data:  # Path("") would read the current directory
+        raise ValueError("data must name the directory `caustics-jax export` wrote, got an empty path")
+    check_output_file("--json", args.json)
     argv = [args.data] + (["--kernels", *args.kernels] if args.kernels else [])
     argv += ["--scenes", *args.scenes] if args.scenes else []
     return conformance.main(argv + (["--json", args.json] if args.json else []), prog="caustics-jax conformance")

@@ -217,7 +217,13 @@ class SurfaceMesh(eqx.Module):
         _check_fits(grid.vertex_xy(), out_dtype, "grid positions x0 + i dx, y0 + j dy")
         V = np.concatenate([grid.vertex_xy(), H.reshape(-1, 1)], axis=-1)
         if normals is not None:
-            normals = np.asarray(normals).reshape(-1, 3)
+            # Exactly the heights' layout: a reshape alone would take a transposed
+            # (nx + 1, ny + 1, 3) array, or a flat one, and scramble the normals silently.
+            normals = real_array("normals", normals)
+            if normals.shape != H.shape + (3,):
+                raise ValueError(f"normals must have shape {H.shape + (3,)} (heights' (ny + 1, nx + 1) followed "
+                                 f"by 3, normals[j, i] at vertex (i, j)), got {normals.shape}")
+            normals = normals.reshape(-1, 3)
         return cls.from_arrays(
             V, grid.faces(), normals, grid=grid, dtype=default_float_dtype(heights, dtype), **kwargs
         )
@@ -290,7 +296,9 @@ def cross_edge(
 ):
     """Cross edge `edge` of `face` at edge parameter `t` into the neighbouring face.
 
-    `t` is the `barycentric.py` edge parameter of the exit point. Returns
+    `edge` is 0, 1 or 2 (or -1 where `face < 0`, as returned on a boundary; a `ValueError`
+    otherwise, on concrete input; inside jit it is clipped) and `t` the `barycentric.py`
+    edge parameter of the exit point. Returns
     `(next_face, next_edge, next_t, next_ab)`: the neighbour, the index of the shared
     edge within it, the entry point's parameter on that edge (same convention) and its
     barycentrics `(a, b)` in the neighbour, which give the same world point. On a boundary
@@ -302,6 +310,13 @@ def cross_edge(
                          f"got {type(mesh).__name__}")
     face, edge = jnp.asarray(face), jnp.asarray(edge)
     n_faces = mesh.neighbors.shape[0]
+    # (inside jit the edge is clipped to [0, 2]; on the host a wrong one is refused, not clipped)
+    if not isinstance(edge, jax.core.Tracer) and not isinstance(face, jax.core.Tracer):
+        f_np, e_np = np.broadcast_arrays(np.asarray(face), np.asarray(edge))
+        bad = e_np[(e_np > 2) | (e_np < np.where(f_np >= 0, 0, -1))]
+        if bad.size:
+            raise ValueError(f"cross_edge: edge must be 0, 1 or 2 (edge k joins vertices k and k + 1 mod 3; "
+                             f"-1 too where face < 0, as cross_edge returns on a boundary), got {int(bad[0])}")
     if not isinstance(face, jax.core.Tracer) and face.size and int(np.max(face)) >= n_faces:
         raise ValueError(f"cross_edge: face must lie below the mesh's {n_faces} faces (or be < 0: no face), "
                          f"got {int(np.max(face))}")

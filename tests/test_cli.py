@@ -168,3 +168,23 @@ def test_conformance_errors_carry_the_command_prefix(capsys, tmp_path):
     (it printed `conformance: ...`)."""
     assert cli.main(["conformance", str(tmp_path / "missing")]) == 2
     _one_line_error(capsys, "caustics-jax conformance: ", "no exported kernels or scenes")
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["export", "--out", "", "--kernels", "fresnel", "--count", "8"], "--out"),
+    (["compare", "--n", "8", "--json", ""], "--json"), (["demo", "--figure", ""], "--figure"),
+    (["conformance", ""], "data"), (["conformance", "refdata", "--json", ""], "--json"),
+])
+def test_an_empty_path_is_refused_in_one_line(no_run, capsys, tmp_path, monkeypatch, argv, flag):
+    """`export --out ""` had written into the current directory (`Path("")` is `.`); an empty
+    `--json` or `--figure` had read "is a directory", an empty conformance `data` had read `.`."""
+    from caustics_jax import export
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("export started working on an empty --out")
+
+    monkeypatch.setattr(export.writer, "export_kernel", no_work)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(argv) == 2
+    _one_line_error(capsys, f"caustics-jax {argv[0]}: {flag}", "empty path")
+    assert not any(tmp_path.iterdir())

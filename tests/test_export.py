@@ -307,6 +307,38 @@ def test_bad_arguments_raise_value_error_and_the_cli_says_why(tmp_path, capsys):
         ex.read_records(m, b"\0" * 3)
 
 
+
+def test_a_name_given_twice_is_exported_once_and_one_string_is_one_name(tmp_path, capsys, monkeypatch):
+    """`--kernels fresnel refract fresnel` had declared `cj_fresnel_record` twice, so the header
+    did not compile (struct redefinition); `kernels="fresnel"` had been read letter by letter
+    (`unknown kernel(s) ['f', 'r', ...]`), and `kernels=5` had been a TypeError."""
+    out = tmp_path / "cli"
+    assert cli.main(["export", "--out", str(out), "--kernels", "fresnel", "refract", "fresnel", "--count", "8"]) == 0
+    assert "(kernels: fresnel, refract; scenes: none)" in capsys.readouterr().out
+    header = (out / "caustics_records.h").read_text()
+    assert header.count("typedef struct cj_fresnel_record") == 1
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is not None:
+        prog = tmp_path / "use.c"
+        prog.write_text(f'#include "{out / "caustics_records.h"}"\n'
+                        "int main(void) { cj_fresnel_record a = {0}; cj_refract_record b = {0}; "
+                        "return (int)(a.case_tag + b.case_tag); }\n")
+        subprocess.run([cc, "-std=c11", "-Wall", "-Werror", "-fsyntax-only", str(prog)], check=True)
+    written = ex.export(tmp_path / "api", kernels="fresnel", count=8)
+    assert [p.name for p in written] == ["fresnel.json", "fresnel.bin", "caustics_records.h"]
+    assert ex.c_header([ex.KERNELS["fresnel"]] * 2).count("typedef struct cj_fresnel_record") == 1
+    seen = []
+    monkeypatch.setattr(ex.scene_writer, "write_scenes", lambda out, names, lanes, seed: seen.append(names) or [])
+    ex.export(tmp_path / "s", kernels=[], scenes="flat_pool")
+    ex.export(tmp_path / "s", kernels=[], scenes=("lagoon", "flat_pool", "lagoon"))
+    assert seen == [["flat_pool"], ["lagoon", "flat_pool"]]
+    for kwargs, match in [(dict(kernels=5), "kernels must be None, a kernel name or a list of kernel names"),
+                          (dict(kernels=[], scenes=5), "scenes must be None, a scene name or a list of scene names"),
+                          (dict(kernels=[["fresnel"]]), "unknown kernel"),
+                          (dict(kernels="fresnell"), "unknown kernel")]:
+        with pytest.raises(ValueError, match=match):
+            ex.export(tmp_path / "bad", **kwargs)
+
 def _unwritable_dir(tmp_path) -> Path:
     """An existing directory no file can be created in: mode 0o500, or, where that does not
     stop writes (root), /proc, whose top level takes no new files."""
@@ -340,6 +372,20 @@ def test_out_below_a_file_or_unwritable_is_refused_before_any_work(tmp_path, cap
         assert err.startswith("caustics-jax export: ") and message in err and "Traceback" not in err
     assert not (locked / "new").exists()
 
+
+
+def test_an_empty_or_non_path_out_dir_is_refused(tmp_path, monkeypatch):
+    """`export("")` had written into the current directory; `export(None)` had been a TypeError."""
+    def no_work(*args, **kwargs):
+        raise AssertionError("export started working")
+
+    monkeypatch.setattr(ex.writer, "export_kernel", no_work)
+    monkeypatch.chdir(tmp_path)
+    for out, message in [("", "must name a directory, got an empty path"), (None, "must be a directory path"),
+                         (3, "must be a directory path")]:
+        with pytest.raises(ValueError, match=r"--out \(out_dir\) " + message):
+            ex.export(out, kernels=["fresnel"], count=8)
+    assert not any(tmp_path.iterdir())
 
 def test_audit_is_package_data_and_a_missing_or_corrupt_table_is_an_error(tmp_path):
     packaged = Path(str(ex.AUDIT_FILE))

@@ -371,3 +371,32 @@ def test_a_float64_face_that_float32_collapses_is_kept_and_solved_around():
     SurfaceMesh.from_arrays(V, F, dtype="float32")
     with pytest.raises(ValueError, match=r"degenerate faces \(zero area\): faces \[0\]"):
         SurfaceMesh.from_arrays(V.astype(np.float32), F)
+
+
+def test_heightfield_normals_must_have_the_layout_of_the_heights():
+    """Normals are `(ny + 1, nx + 1, 3)` like `heights`: a transposed `(nx + 1, ny + 1, 3)`
+    array (same element count) had been reshaped silently into scrambled normals, and a
+    flat `(3 V,)` one accepted too."""
+    X, Y = np.meshgrid(np.linspace(0, 3, 7), np.linspace(0, 2, 5))  # heights (5, 7)
+    H = 0.05 * np.sin(2 * X) * np.cos(3 * Y)
+    N = np.stack([-0.1 * np.cos(2 * X), 0.15 * np.sin(3 * Y), np.ones_like(H)], -1)
+    mesh = SurfaceMesh.from_heightfield(H, x0=0, y0=0, dx=0.5, dy=0.5, normals=N, dtype="float64")
+    np.testing.assert_allclose(mesh.normals, N.reshape(-1, 3) / np.linalg.norm(N, axis=-1).reshape(-1, 1))
+    for bad in (N.transpose(1, 0, 2).copy(), N.ravel(), N.reshape(-1, 3), N[..., :2]):
+        with pytest.raises(ValueError, match=r"normals must have shape \(5, 7, 3\) \(heights' \(ny \+ 1, nx \+ 1\)"):
+            SurfaceMesh.from_heightfield(H, x0=0, y0=0, dx=0.5, dy=0.5, normals=bad)
+    with pytest.raises(ValueError, match="normals must hold real numbers"):
+        SurfaceMesh.from_heightfield(H, x0=0, y0=0, dx=0.5, dy=0.5, normals="up")
+
+
+@pytest.mark.parametrize("face, edge", [(0, 3), (0, 5), (0, -1), (-1, -2), (-1, 3), ([0, 1, 2], [0, 1, 7]),
+                                        ([[1], [-1]], [[2], [-2]])])
+def test_cross_edge_refuses_an_edge_outside_0_1_2(face, edge):
+    """Edge 5 had been clipped silently to edge 2 (and -1 to 0), crossing a different edge;
+    -1 stays accepted where face < 0 (cross_edge's own answer on a boundary)."""
+    mesh = SurfaceMesh.from_heightfield(np.zeros((3, 3)), x0=0, y0=0, dx=1, dy=1)
+    face, edge = np.asarray(face), np.asarray(edge)
+    with pytest.raises(ValueError, match=r"cross_edge: edge must be 0, 1 or 2"):
+        cross_edge(mesh, face, edge, np.full(edge.shape, 0.3))
+    g, k, _, _ = cross_edge(mesh, np.array([-1, 0]), np.array([-1, 2]), np.array([0.3, 0.3]))
+    assert g.tolist() == [-1, 1] and k.tolist() == [-1, 0]

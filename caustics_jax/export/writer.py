@@ -12,8 +12,10 @@ tolerances come from `tolerance.py`. Same arguments, same bytes.
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 import zlib
+from collections.abc import Iterable
 from pathlib import Path
 
 import jax
@@ -109,36 +111,52 @@ def _check_out_dir(out: Path) -> None:
         raise ValueError(f"--out {out} is not writable: {exc.strerror or exc}") from None
 
 
+def _selection(arg: str, value, registry: dict, what: str) -> list[str]:
+    """`kernels` / `scenes` as registered names: None is all of them, one string is one
+    name, a name given twice counts once (at its first place: a header declaring a record
+    twice does not compile); a `ValueError` for anything else or an unknown name."""
+    if value is None:
+        return list(registry)
+    if isinstance(value, str):
+        value = [value]
+    if isinstance(value, bytes | bytearray) or not isinstance(value, Iterable):
+        raise ValueError(f"{arg} must be None, a {what} name or a list of {what} names, got {value!r}")
+    names = list(value)
+    unknown = [n for n in names if not isinstance(n, str) or n not in registry]
+    if unknown:
+        raise ValueError(f"unknown {what}(s) {unknown}; choose from {sorted(registry)}")
+    return list(dict.fromkeys(names))
+
+
 def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0,
            scenes: list[str] | None = (), lanes: int = 256) -> list[Path]:
     """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h`, and
     `<scene>.json`, `<scene>.bin` per scene and `caustics_scene.h`, into `out_dir`.
 
-    `kernels`: names of `KERNELS` (None: all; empty: none). `count` random and planted
-    records per kernel (a quarter planted), plus each kernel's fixed adversarial cases.
-    `scenes`: names of `SCENES` (None: all; default none), each with `lanes` lanes
+    `kernels`: names of `KERNELS` (None: all; empty: none; one string: that kernel; a
+    name given twice is exported once). `count` random and planted records per kernel (a
+    quarter planted), plus each kernel's fixed adversarial cases. `scenes`: names of
+    `SCENES` (None: all; default none; as `kernels`), each with `lanes` lanes
     (`scene_writer.export_scene`). Same arguments, same bytes. Raises ValueError, before
     any work, on unknown kernel or scene names, a count below 4, lanes outside
-    [1, 2^20], a negative seed, or an `out_dir` that is a file, lies below a file or
-    cannot be created or written.
+    [1, 2^20], a negative seed, or an `out_dir` that is empty, a file, lies below a file
+    or cannot be created or written.
     """
     from .scene_registry import SCENES
     from .scene_writer import write_scenes
 
-    names = list(KERNELS) if kernels is None else list(kernels)
-    unknown = [k for k in names if k not in KERNELS]
-    if unknown:
-        raise ValueError(f"unknown kernel(s) {unknown}; choose from {sorted(KERNELS)}")
-    scene_names = list(SCENES) if scenes is None else list(scenes)
-    unknown = [s for s in scene_names if s not in SCENES]
-    if unknown:
-        raise ValueError(f"unknown scene(s) {unknown}; choose from {sorted(SCENES)}")
+    names = _selection("kernels", kernels, KERNELS, "kernel")
+    scene_names = _selection("scenes", scenes, SCENES, "scene")
     if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 4:
         raise ValueError(f"count must be an integer >= 4, got {count!r}")
     if isinstance(lanes, bool) or not isinstance(lanes, int | np.integer) or not 1 <= lanes <= 2**20:
         raise ValueError(f"lanes must be an integer in [1, 2^20], got {lanes!r}")
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if not isinstance(out_dir, str | os.PathLike):
+        raise ValueError(f"--out (out_dir) must be a directory path (str or os.PathLike), got {out_dir!r}")
+    if not os.fspath(out_dir):  # Path("") is the current directory: an empty --out had written there
+        raise ValueError("--out (out_dir) must name a directory, got an empty path")
     out = Path(out_dir)
     _check_out_dir(out)
     written = []

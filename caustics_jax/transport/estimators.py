@@ -25,8 +25,8 @@ shape"). Solutions count as "the same" within `same_radius` (m). A Newton point 
 only where the refracted ray points towards `L` (`objectives.bracket_objective` status
 OK): the half-vector constraint also vanishes on non-physical configurations.
 
-Both are seeded (`seed`), vectorised over receivers, and return the number of Newton
-solves each receiver used, the cost they compare by.
+Both are seeded (`seed`, an integer in [0, 2^31 - 1]), vectorised over receivers, and
+return the number of Newton solves each receiver used, the cost they compare by.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arguments import check_eta, check_fits, check_points, check_real, check_scene_scale
+from ..arguments import check_eta, check_fits, check_int, check_points, check_real, check_scene_scale
 from ..lanes import lanes_per_block
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
@@ -137,6 +137,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     `newton_options` go to
     `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...)."""
     k = _check_count("k", k, 1)
+    seed = check_int("seed", seed, 0)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
     lane = np.repeat(np.arange(n), k)
@@ -169,6 +170,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
     """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
     path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring)."""
     max_trials = _check_count("max_trials", max_trials, 1)
+    seed = check_int("seed", seed, 0)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
     found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton_options)

@@ -101,6 +101,11 @@ def test_biased_sms_never_exceeds_the_total_and_reaches_it_with_many_starts():
         (sms_unbiased, dict(seed=0, intensity=1e39), "intensity overflows float32"),
         (sms_unbiased, dict(seed=0, eta=1e39), "eta overflows float32"),
         (sms_biased, dict(k=2, seed=0, same_radius=-1.0), "same_radius"),
+        # seed: numpy's own message (not naming seed) for -1, a TypeError for 1.5
+        (sms_biased, dict(k=2, seed=-1), r"seed must be an integer in \[0, 2147483647\], got -1"),
+        (sms_unbiased, dict(seed=1.5), r"seed must be an integer in \[0, 2147483647\], got 1.5"),
+        (sms_unbiased, dict(seed=True), "seed must be an integer"),
+        (sms_biased, dict(k=2, seed="7"), "seed must be an integer"),
     ],
 )
 def test_bad_estimator_arguments_raise_value_error(fn, kwargs, match):
