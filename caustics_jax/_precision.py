@@ -50,6 +50,19 @@ def check_float_dtype(dtype) -> jnp.dtype:
     return dtype
 
 
+def check_mesh_dtype(dtype, name: str = "mesh") -> None:
+    """A `ValueError` when `name` (a mesh or another stored input) holds float64 while
+    `jax_enable_x64` is off: it was built inside `precision("float64")` and is used outside
+    it, where every new array (the points passed with it) is float32. Without this check
+    the first error was a misleading "P is float32 but the mesh is float64"."""
+    if jnp.dtype(dtype) == jnp.dtype("float64") and not jax.config.jax_enable_x64:
+        raise ValueError(
+            f"the {name} is float64 but jax_enable_x64 is off (was it built inside "
+            "`caustics_jax.precision('float64')`?): use it inside that context too, call "
+            f"`caustics_jax.enable_x64()`, or cast it to float32 ({name}.astype('float32'))"
+        )
+
+
 def default_float_dtype(like, dtype=None) -> jnp.dtype:
     """The float dtype of a new array: `dtype` when given (validated), float32 when `like`
     is float32 or a half precision (float16, bfloat16: computed in float32, as the

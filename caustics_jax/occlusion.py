@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool
 
+from ._precision import check_mesh_dtype
 from .mesh import SurfaceMesh
 from .prepared import PreparedSurface, prepare
 from .start_points import Accel, first_hit
@@ -70,6 +71,7 @@ def segment_blocked(surface: SurfaceMesh | PreparedSurface, A, B, *, exclude_fac
 
 
 def _check_points(mesh: SurfaceMesh, A, B):
+    check_mesh_dtype(mesh.dtype, "surface")
     A, B = jnp.asarray(A), jnp.asarray(B)
     for name, x in (("A", A), ("B", B)):
         if x.shape[-1:] != (3,) or x.ndim > 2:

@@ -32,6 +32,7 @@ import weakref
 import jax.numpy as jnp
 import numpy as np
 
+from ._precision import check_mesh_dtype
 from .features import SceneFeatures, features
 from .frames import grid_state, local_mesh, local_origin
 from .lanes import padded_mesh
@@ -160,9 +161,11 @@ _CACHE: dict[int, tuple[weakref.ref, _Analysis]] = {}
 def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
     """The `PreparedSurface` of `mesh`, analysed on first use and cached per mesh object."""
     if isinstance(mesh, PreparedSurface):
+        check_mesh_dtype(mesh.dtype)
         return mesh
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
+    check_mesh_dtype(mesh.dtype)
     hit = _CACHE.get(id(mesh))
     if hit is not None and hit[0]() is mesh:
         return PreparedSurface(mesh, hit[1])

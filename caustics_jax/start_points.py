@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ._precision import real_input_dtype
+from ._precision import check_mesh_dtype, real_input_dtype
 from .bvh import FaceBVH, build_bvh, first_hit_bvh
 from .crossing import segment_triangle
 from .face_cells import FaceCells, bin_faces, cells_from_layout, first_hit_cells
@@ -178,24 +178,27 @@ def _require_concrete(mesh: SurfaceMesh, what: str) -> None:
                          "(or bvh=) built outside")
 
 
-def check_segments(mesh: SurfaceMesh, P, L):
+def check_segments(mesh: SurfaceMesh, P, L, names: tuple[str, str] = ("P", "L")):
     """`P`, `L` for `start_points` on `mesh`: real arrays of shape `(..., 3)` broadcast
     together, floats only in the mesh's dtype and finite (concrete arrays), cast and
-    broadcast; a `ValueError` naming the problem otherwise (docs/input_contract.md)."""
+    broadcast; a `ValueError` naming the problem otherwise (docs/input_contract.md), with the
+    arguments called `names` (another function's segment ends, e.g. `M`)."""
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
-    for name, x in (("P", P), ("L", L)):
+    check_mesh_dtype(mesh.dtype)
+    a, b = names
+    for name, x in ((a, P), (b, L)):
         real_input_dtype(name, x)  # bool, complex, strings: ValueError (docs/input_contract.md)
         if np.ndim(x) == 0:
-            raise ValueError(f"P and L must have shape (..., 3), got {name} = {x!r}")
+            raise ValueError(f"{a} and {b} must have shape (..., 3), got {name} = {x!r}")
     P, L = jnp.asarray(P), jnp.asarray(L)
     if P.shape[-1:] != (3,) or L.shape[-1:] != (3,):
-        raise ValueError(f"P and L must have shape (..., 3), got {P.shape} and {L.shape}")
+        raise ValueError(f"{a} and {b} must have shape (..., 3), got {P.shape} and {L.shape}")
     try:
         shape = jnp.broadcast_shapes(P.shape, L.shape)
     except ValueError:
-        raise ValueError(f"P {P.shape} and L {L.shape} do not broadcast together") from None
-    for name, x in (("P", P), ("L", L)):
+        raise ValueError(f"{a} {P.shape} and {b} {L.shape} do not broadcast together") from None
+    for name, x in ((a, P), (b, L)):
         if not jnp.issubdtype(x.dtype, jnp.floating):
             continue
         if x.dtype != mesh.dtype:

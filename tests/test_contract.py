@@ -11,8 +11,9 @@ import pytest
 
 import caustics_jax as cj
 import caustics_jax.kernels as K
-from caustics_jax import arguments, compare, scenes
+from caustics_jax import arguments, compare, occlusion, scenes
 from caustics_jax.solvers import _solve
+from caustics_jax.transport.visibility import path_visible
 
 # --------------------------------------------------------------------------- kernels
 # One example per public kernel, arrays integer-valued where the kernel takes float data, so
@@ -631,3 +632,26 @@ def test_static_configuration_and_missing_arrays_are_value_errors(call, match):
     is the documented default (a huge `passes` would loop for ever instead)."""
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_a_float64_mesh_used_with_x64_off_names_the_cause():
+    """A float64 mesh built inside `precision("float64")` and used outside it: every entry
+    point says x64 is off (it had said "P is float32 but the mesh is float64" for float64
+    points, which JAX had silently made float32; README's second example did this)."""
+    with cj.precision("float64"):
+        scene = scenes.wavy_pool(128, dtype="float64")
+        mesh = scene.surface
+        P = np.asarray(scene.receivers[:4])
+        L = np.asarray(scene.lights.endpoint(P))
+    grid = cj.ReceiverGrid(-1.0, -2, 2, -2, 2, 4, 4)
+    calls = [
+        lambda: cj.solve(mesh, P, L), lambda: cj.prepare(mesh), lambda: cj.start_points(mesh, P, L),
+        lambda: cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0, 0, 1]),
+        lambda: cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid, n_photons=16),
+        lambda: occlusion.segment_blocked(mesh, P, L),
+        lambda: path_visible(mesh, P, (P + L) / 2, L),
+    ]
+    with cj.precision("float32"):
+        for call in calls:
+            with pytest.raises(ValueError, match="jax_enable_x64 is off"):
+                call()

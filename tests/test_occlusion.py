@@ -223,3 +223,24 @@ def test_a_nan_segment_crosses_nothing_and_path_visible_refuses_it():
         path_visible(pool, A, (A + B) / 2, B)
     with pytest.raises(ValueError, match="float64 but the mesh is float32"):
         path_visible(pool, np.asarray(A[::2], np.float64), (A[::2] + B[::2]) / 2, B[::2])
+
+
+def test_path_visible_names_the_argument_it_refuses():
+    """`path_visible` checks `P -> M` and `M -> L` as segments: an error in `M` names `M`
+    (it had said "L has NaN" for a NaN in `M`, "P and L must have shape" for `M` (4, 2))."""
+    from caustics_jax.transport.visibility import path_visible
+
+    pool = wavy_pool(128, dtype="float32").surface
+    P = np.tile(np.asarray([0.1, 0.2, -1.0], np.float32), (4, 1))
+    L = P + np.float32(2.0) * np.asarray([0, 0, 1], np.float32)
+    M = (P + L) / 2
+    cases = [
+        ((P, np.where(M == M[1], np.nan, M), L), r"^M has NaN or Inf"),
+        ((P, M[:, :2], L), r"^P and M must have shape \(\.\.\., 3\)"),
+        ((P, M, L[:, :2]), r"^M and L must have shape \(\.\.\., 3\)"),
+        ((P, M.astype(np.float64), L), r"^M is float64 but the mesh is float32"),
+        ((P, M, np.where(L == L[0], np.inf, L)), r"^L has NaN or Inf"),
+    ]
+    for args, match in cases:
+        with pytest.raises(ValueError, match=match):
+            path_visible(pool, *args)

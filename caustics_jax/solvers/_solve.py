@@ -161,9 +161,10 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
         P: `(N, 3)` receivers inside the medium (cast to the mesh's dtype).
         L: `(N, 3)` light positions (or one `(3,)` broadcast to all).
         eta: `eta_in / eta_out` (water 1.333), one finite positive number.
-        method: "walk" (seed 001 curve walk), "newton" (optimistix baselines),
-            "exhaustive" (all solutions, reference), or a solver object `Walk(...)`,
-            `Newton(...)`, `Exhaustive(...)`.
+        method: "walk" (the default: seed 001 curve walk), "newton" (optimistix
+            baselines), "exhaustive" (all solutions, the float64 reference), "trace"
+            (every solution on the walk's curve), or a solver object `Walk(...)`,
+            `Newton(...)`, `Exhaustive(...)`, `Trace(...)`.
         start: optional precomputed `start_points(mesh, P, L)` result.
         features: `"auto"` (default: the mesh's `SceneFeatures`), `None` (always the
             general path) or a `SceneFeatures` from `features(mesh)`. Walk and Newton
@@ -176,7 +177,8 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
             (docs/features.md); `iterations` and `crossed` of closed-form lanes count the
             root solve's halvings and no crossings. Ignored by "exhaustive".
         **options: the solver's options when `method` is a name (`Walk`, `Newton`,
-            `Exhaustive` list them).
+            `Exhaustive`, `Trace` list them); `solutions="all"` (walk or exhaustive)
+            asks for every solution per lane.
 
     Walk and Newton run the lanes in fixed-size blocks spread over every local device
     (`lanes.run_blocks`, `lanes.on_devices`) on the mesh padded to power-of-two sizes:
@@ -189,7 +191,8 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
     for the mesh) and the points come back moved by `+origin`, rounded once: float32 keeps
     the digits the triangles need (docs/input_contract.md "Scale").
 
-    Returns a `Solution` (an `ExhaustiveSolution` for `Exhaustive(return_all=True)`);
+    Returns a `Solution` (an `ExhaustiveSolution` for `Exhaustive(return_all=True)`,
+    `Trace` and `solutions="all"`);
     `status` holds `Status` codes and `found` is True exactly where a point with
     `|residual| <= tol` was returned. Bad input raises `ValueError` here, before any
     jitted work; zero lanes give an empty result.

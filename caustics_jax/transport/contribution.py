@@ -240,11 +240,13 @@ def _sum_all_paths(prep: PreparedSurface, res, P, L, eta, intensity, n_P, sigma_
     n, width = tris.shape
     V, N = mesh.triangle(jnp.asarray(tris))
     E1, E2 = V[..., 1, :] - V[..., 0, :], V[..., 2, :] - V[..., 0, :]
-    ab = barycentric_coordinates(E1, E2, jnp.asarray(pts) - V[..., 0, :])
+    ab = barycentric_coordinates(E1, E2, jnp.asarray(pts, mesh.dtype) - V[..., 0, :])
     P_b = jnp.broadcast_to(jnp.asarray(P, mesh.dtype).reshape(-1, 1, 3), (n, width, 3))
     L_b = jnp.broadcast_to(jnp.asarray(L, mesh.dtype).reshape(-1, 1, 3), (n, width, 3))
     I_b = jnp.broadcast_to(jnp.asarray(intensity, mesh.dtype).reshape(-1, 1), (n, width))
-    E, _ = path_irradiance(V, N, P_b, L_b, ab, eta, I_b, jnp.asarray(n_P)[:, None, :], sigma_t)
+    # arrays in the mesh's dtype, as in the single-path `irradiance` (a float64 `n_P` under
+    # x64 had made a float32 mesh's sum float64; `sigma_t` is a Python float, weakly typed)
+    E, _ = path_irradiance(V, N, P_b, L_b, ab, eta, I_b, jnp.asarray(n_P, mesh.dtype)[:, None, :], sigma_t)
     used = np.arange(width)[None] < count[:, None]
     if visibility and used.any():
         lane, k = np.nonzero(used)

@@ -43,8 +43,8 @@ def path_visible(mesh, P, M, L) -> np.ndarray:
     prep: PreparedSurface = prepare(mesh)
     dtype = prep.dtype
     # Checked as start points are (shape, dtype, finite: one NaN row had looped forever).
-    P, M = check_segments(prep.mesh, P, M)
-    M, L = check_segments(prep.mesh, M, L)
+    P, M = check_segments(prep.mesh, P, M, ("P", "M"))
+    M, L = check_segments(prep.mesh, M, L, ("M", "L"))
     try:
         P, M, L = jnp.broadcast_arrays(P, M, L)
     except ValueError:

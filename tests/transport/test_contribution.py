@@ -260,3 +260,16 @@ def test_visibility_changes_nothing_where_no_path_is_blocked():
     kw = dict(intensity=1.0, receiver_normal=UP)
     np.testing.assert_array_equal(np.asarray(irradiance(scene.surface, P, L, visibility=True, **kw)),
                                   np.asarray(irradiance(scene.surface, P, L, **kw)))
+
+
+def test_all_paths_irradiance_is_in_the_mesh_dtype():
+    """`all_paths=True` on a float32 mesh (walk's every-solution trace) returns float32, as
+    the single path does; a float64 `receiver_normal` under x64 had made the sum float64."""
+    sc = scenes.wavy_pool(128, amplitude=0.05, dtype="float32")
+    P = np.float32([[0.1, 0.2, -1.0], [-0.3, 0.4, -1.2]])
+    L = np.float32([0.4, -0.3, 3.0])
+    for all_paths in (False, True):
+        E = irradiance(sc.surface, P, L, intensity=1.0, receiver_normal=np.asarray([0.0, 0.0, 1.0]),
+                       all_paths=all_paths)
+        assert E.dtype == np.float32, (all_paths, E.dtype)
+        assert np.all(np.isfinite(np.asarray(E))) and np.all(np.asarray(E) > 0)
