@@ -231,3 +231,27 @@ def test_a_shallow_receiver_under_a_wave_finds_the_root_on_a_crossing_into_backw
     lanes = [8, 254]
     ref = solve(sc.surface, P[lanes], L[lanes], method="exhaustive")
     np.testing.assert_allclose(np.asarray(walk.point)[lanes], np.asarray(ref.point), atol=1e-9)
+
+
+def test_a_first_triangle_arc_out_of_total_internal_reflection_is_searched():
+    """512 random lanes on a coarse steep pool (128 faces, amplitude 0.1 m): on 7 lanes `M0`
+    is totally reflecting (or BACKWARD) and the root lies in the first triangle between the
+    onset of transmission and the exit. Only the arc *into* TIR used to be searched, so
+    these lanes walked off the mesh both ways (walk 491 found; on the walk's own curve
+    `Trace(seeds="start")` finds 501, the exhaustive reference 507). The arc out of TIR is
+    now searched as `_walk_update` searches one (tir_end -1): 498 found, float32 alike."""
+    sc = scenes.wavy_pool(128, amplitude=0.1, dtype="float64")
+    rng = np.random.default_rng(3)
+    n = 512
+    P = np.c_[rng.uniform(-1.9, 1.9, (n, 2)), rng.uniform(-1.5, -0.3, n)]
+    L = np.c_[rng.uniform(-3, 3, (n, 2)), rng.uniform(0.5, 4, n)]
+    lanes = [12, 50, 65, 106, 138, 470, 503]
+    for dtype in ("float64", "float32"):
+        mesh = sc.surface.astype(dtype)
+        sol = solve(mesh, P.astype(dtype), L.astype(dtype))
+        assert_solution_sane(sol, dtype)
+        found = np.asarray(sol.found)
+        assert found.sum() >= 498 and found[lanes].all(), (dtype, sol.summary(), found[lanes])
+        err = refraction_angle_error(mesh, np.asarray(sol.triangle)[lanes], np.asarray(sol.barycentric)[lanes],
+                                     P[lanes], L[lanes], 1.333)
+        assert np.all(err < 10 * default_tol(dtype)), (dtype, err)

@@ -108,7 +108,11 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     // goes on (tir_end = 2).
     bool lost_m = stm == CJ_TIR || stm == CJ_BACKWARD, lost_p = stp == CJ_TIR || stp == CJ_BACKWARD;
     bool tir_arc = walk_m ? (dm.ok && st_nm == CJ_OK && lost_m) : (dp.ok && st_np == CJ_OK && lost_p);
-    bool search = !is_ellipse && !(br_p || br_m) && tir_arc;
+    // ... or out of it: the near point totally reflecting (or BACKWARD), the exit
+    // transmitting; the root between the onset and the exit (tir_end = -1).
+    bool lost_nm = st_nm == CJ_TIR || st_nm == CJ_BACKWARD, lost_np = st_np == CJ_TIR || st_np == CJ_BACKWARD;
+    bool tir_out = walk_m ? (dm.ok && lost_nm && stm == CJ_OK) : (dp.ok && lost_np && stp == CJ_OK);
+    bool search = !is_ellipse && !(br_p || br_m) && (tir_arc || tir_out);
     s.tau = is_ellipse ? tau_e : (use_m ? dm.tau : dp.tau);
     s.perp = is_ellipse ? perp_e : (use_m ? dm.perp : dp.perp);
     s.phi_lo = is_ellipse ? e_phi_lo : (use_m ? dm.phi_s : dp.phi_s);
@@ -140,7 +144,7 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     s.face = face;
     s.anchor = ab0;
     s.side = 0;
-    s.tir_end = searching ? 2 : 0;
+    s.tir_end = searching ? (tir_arc ? 2 : -1) : 0;
     s.best_ab = ab0;
     s.best_f = f0;
     s.steps = 0;

@@ -254,6 +254,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
         found=found, is_ellipse=~okp & ~okm, br_p=br_p, br_m=br_m, use_m_bracket=use_m_bracket, walk_m=walk_m,
         # The arc of each direction runs into TIR (or BACKWARD) from a transmitting near point.
         tir_arc_p=okp & (st_all[3] == OK) & lost(stp), tir_arc_m=okm & (st_all[4] == OK) & lost(stm),
+        # ... or out of it: M0 totally reflecting (or BACKWARD), the exit transmitting, the
+        # root between the onset and the exit (as `_walk_update`'s tir_end -1).
+        tir_out_p=okp & lost(st_all[3]) & (stp == OK), tir_out_m=okm & lost(st_all[4]) & (stm == OK),
         degenerate_exit_p=stp == DEG, degenerate_exit_m=stm == DEG, at_m0=at_m0,
         # A singular conic at a solution M0 does not matter (P, L and the normal aligned
         # on a flat surface make every point of the plane "coplanar"): M0 stays FOUND.
@@ -267,7 +270,7 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
 
 #: The booleans of `_Start.flags`, bit i = name i.
 _FLAGS = ("found", "is_ellipse", "br_p", "br_m", "use_m_bracket", "walk_m", "tir_arc_p", "tir_arc_m",
-          "degenerate_exit_p", "degenerate_exit_m", "at_m0", "degenerate", "okp", "okm")
+          "degenerate_exit_p", "degenerate_exit_m", "at_m0", "degenerate", "okp", "okm", "tir_out_p", "tir_out_m")
 
 
 def _pack_flags(flags: dict) -> jax.Array:
@@ -307,7 +310,8 @@ def _start_states(start: _Start):
         # the root 1e-9 m from M0 and the rest of the triangle in TIR). Without a root
         # there the walk goes on as before (tir_end = 2).
         tir_arc = jnp.where(walk_m, fl["tir_arc_m"], fl["tir_arc_p"])
-        search = ~is_ellipse & ~(br_p | br_m) & tir_arc
+        tir_out = jnp.where(walk_m, fl["tir_out_m"], fl["tir_out_p"])
+        search = ~is_ellipse & ~(br_p | br_m) & (tir_arc | tir_out)
         tau = jnp.where(is_ellipse, e.tau, pm(start.tau, use_m))
         perp = jnp.where(is_ellipse, e.perp, pm(start.perp, use_m))
         phi_lo = jnp.where(is_ellipse, phis_all[j], pm(start.phi_near, use_m))
@@ -344,7 +348,7 @@ def _start_states(start: _Start):
             f_exit=pm(start.f, pick_m),
             anchor=start.ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
             ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32),
-            tir_end=jnp.where(searching, 2, 0).astype(jnp.int32),
+            tir_end=jnp.where(searching, jnp.where(tir_arc, 2, -1), 0).astype(jnp.int32),
             best_ab=start.ab0,
             best_f=start.f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
         )
