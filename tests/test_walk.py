@@ -255,3 +255,32 @@ def test_a_first_triangle_arc_out_of_total_internal_reflection_is_searched():
         err = refraction_angle_error(mesh, np.asarray(sol.triangle)[lanes], np.asarray(sol.barycentric)[lanes],
                                      P[lanes], L[lanes], 1.333)
         assert np.all(err < 10 * default_tol(dtype)), (dtype, err)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_segments_through_an_edge_or_a_vertex_are_walked_into_the_neighbour(dtype):
+    """`M0` on an edge (a segment `P -> L` through an edge midpoint, or a light straight over
+    a grid vertex): the direction that leaves the triangle across that edge used to take the
+    next root in pencil order, a re-entry, and walk an arc outside the triangle; and the
+    first arc in the neighbour starts on the line PL, where `g`'s sign is undefined
+    (`arcs.leaving_at_start`, `_walk_update`'s `from_m0`). 256 segments through edge
+    midpoints of `wavy_pool(2048)`: 168 found before, 256 now (float32: 134, 255); a light at
+    (0, 0, 3) over the centre vertex with 31 x 31 floor receivers: 917 before, 958 now
+    (float32: 910, 958), the exhaustive reference 961. The bounds leave two lanes in
+    float32."""
+    sc = scenes.wavy_pool(2048, dtype="float64")
+    V, F = np.asarray(sc.surface.vertices), np.asarray(sc.surface.faces)
+    rng = np.random.default_rng(41)
+    fi = rng.choice(np.flatnonzero(np.abs(V[F].mean(1)[:, :2]).max(1) < 1.4), 256)
+    off = np.c_[rng.uniform(-0.3, 0.3, (256, 2)), np.ones(256)]
+    X = 0.5 * (V[F[fi, 0]] + V[F[fi, 1]])
+    g = np.linspace(-1.5, 1.5, 31)
+    grid = np.c_[np.repeat(g, 31), np.tile(g, 31), -np.ones(961)]
+    P = np.concatenate([X - 0.7 * off, grid])
+    L = np.concatenate([X + 1.5 * off, np.broadcast_to([0.0, 0.0, 3.0], (961, 3))])
+    mesh = sc.surface.astype(dtype)
+    sol = solve(mesh, P.astype(dtype), L.astype(dtype))
+    assert_solution_sane(sol, dtype)
+    found = np.asarray(sol.found)
+    need = (256, 958) if dtype == "float64" else (254, 956)
+    assert found[:256].sum() >= need[0] and found[256:].sum() >= need[1], (dtype, found[:256].sum(), found[256:].sum())

@@ -97,6 +97,25 @@ bool cj_next_crossing(float t[6], uint valid[6], vec2 ab[6], vec2 e, vec2 tau, v
     return !isinf(best_phi);
 }
 
+// A start point e on an edge, travelling out of the triangle across that edge at once:
+// the exit is that edge's root at e (angle 0), not the next root in pencil order
+// (arcs.leaving_at_start). Returns whether it replaced the crossing.
+bool cj_leaving_at_start(float t[6], uint valid[6], vec2 ab[6], vec2 e, vec2 tau, inout int edge, inout float t_x,
+                         inout vec2 ab_x, inout float phi_x) {
+    for (int i = 0; i < 6; ++i) {
+        float dist = cj_norm2(ab[i] - e);
+        float scale = (abs(ab[i].x) + abs(ab[i].y)) + (abs(e.x) + abs(e.y));
+        if (valid[i] != 0u && dist <= 8.0 * CJ_EPS * scale && dot(CJ_INWARD[i / 2], tau) < 0.0) {
+            edge = i / 2;
+            t_x = t[i];
+            ab_x = ab[i];
+            phi_x = 0.0;
+            return true;
+        }
+    }
+    return false;
+}
+
 // The conic point nearest q along the gradient direction at q (arcs.project_to_conic).
 vec2 cj_project_to_conic(float coef[6], vec2 q) {
     vec2 t = cj_conic_tangent(coef, q);

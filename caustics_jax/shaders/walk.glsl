@@ -85,6 +85,7 @@ Direction cj_direction(float coef[6], float rt[6], uint rv[6], vec2 rab[6], vec2
     Direction d;
     cj_orientation(coef, ab0, t0, d.tau, d.perp);
     d.ok = cj_next_crossing(rt, rv, rab, ab0, d.tau, d.perp, -1, 0.0, d.k, d.t, d.ab, d.phi);
+    d.ok = cj_leaving_at_start(rt, rv, rab, ab0, d.tau, d.k, d.t, d.ab, d.phi) || d.ok;
     d.room = cj_norm2(d.ab - ab0);
     float delta = d.ok ? min(CJ_DELTA0, 0.25 * d.room) : CJ_DELTA0;
     d.near = cj_project_to_conic(coef, ab0 + delta * d.tau);
@@ -250,6 +251,7 @@ void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta
 // Cross into face g at e (entry edge k_in); bracket if f changes sign on its arc, else
 // schedule the next crossing (walk._walk_geometry and _walk_update).
 WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
+    bool from_m0 = s.phi_hi == 0.0;  // this crossing enters the neighbour at M0 (cj_leaving_at_start)
     int k_in;
     float t_in;
     vec2 e;
@@ -283,7 +285,9 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     bool e_ok = st_e == CJ_OK, x_ok = stx == CJ_OK;
     bool found_e = e_ok && abs(f_e) <= tol;
     bool found_x = ok && x_ok && abs(fx) <= tol;
-    bool bracket = ok && e_ok && x_ok && cj_root_between(f_e, g_e, fx, gx);
+    // Entering the neighbour at M0 itself (exit angle 0, cj_leaving_at_start): g is undefined
+    // on the line PL, so a sign change of f alone brackets (walk._walk_update).
+    bool bracket = ok && e_ok && x_ok && (cj_root_between(f_e, g_e, fx, gx) || (from_m0 && cj_opposite(f_e, fx)));
     bool lost = !ok || side == 0.0;
     // An arc from a transmitting point to a totally reflecting one (or back) may hold a root
     // between the transmitting end and the onset of TIR: search it towards the onset.

@@ -56,6 +56,7 @@ from ..arcs import (
     INWARD,
     edge_roots,
     inside,
+    leaving_at_start,
     next_crossing,
     opposite,
     orientation,
@@ -203,7 +204,8 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
 
     def direction(sign):
         tau, perp = orientation(coef, ab0, sign * t0)
-        ok, k, t, ab, phi = next_crossing(roots, ab0, tau, perp)
+        crossing = leaving_at_start(roots, ab0, tau, next_crossing(roots, ab0, tau, perp))
+        ok, k, t, ab, phi = crossing
         room = jnp.linalg.norm(ab - ab0)
         delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
         near = project_to_conic(coef, ab0 + delta * tau)
@@ -410,7 +412,12 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     e_ok, x_ok = st_e == ObjectiveStatus.OK, stx == ObjectiveStatus.OK
     found_e = e_ok & (jnp.abs(f_e) <= tol)
     found_x = ok & x_ok & (jnp.abs(fx) <= tol)
-    bracket = ok & e_ok & x_ok & root_between((f_e, g2[0]), (fx, g2[1]))
+    # Entering the neighbour at `M0` itself (the first triangle left through the edge `M0`
+    # lies on: `arcs.leaving_at_start`, exit angle 0): `g`'s "line" sign is undefined at a
+    # point of the line PL, so there a sign change of `f` alone brackets (`f` is continuous
+    # through `M0`, `signed_sine_and_status`).
+    from_m0 = s.phi_hi == 0
+    bracket = ok & e_ok & x_ok & (root_between((f_e, g2[0]), (fx, g2[1])) | (from_m0 & opposite(f_e, fx)))
     lost = ~ok | (side == 0)
     # An arc from a transmitting point to a totally reflecting one (or back) may hold a
     # root between the transmitting end and the onset of TIR, where neither end shows a
