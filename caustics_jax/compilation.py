@@ -17,11 +17,11 @@ bounded (`MAX_BYTES`, least recently used entries evicted) unless the user set
 around every read and write. Unbounded, JAX writes entries without a lock, so a process can
 read a program another one is still writing (two test workers, two runs started
 together): a pytest worker crashed while a second process compiled the same programs. Even
-bounded (locked), three test runs on 2026-11-30 each lost a worker to a segfault inside
-JAX's executable serialisation (twice) or deserialisation (once); not reproduced by a single
-process writing (and reading) the same programs, cause not found. The tests run with the
-cache off (tests/conftest.py); `CAUSTICS_JAX_COMPILATION_CACHE=0` does the same for a job
-that crashes there. The cache is
+bounded (locked), a test worker crashed twice on 2026-11-30 inside JAX's cache read (and
+once its write) while another process used the same directory; the cause was not found (a
+sequential write and read of the same programs was fine). The tests therefore use one
+directory per process (tests/conftest.py); processes that run at the same time can do the
+same with `CAUSTICS_JAX_COMPILATION_CACHE=<own dir>`, or `0`. The cache is
 trusted code: keep it in a directory only you can write (JAX's warning for
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 """

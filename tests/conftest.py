@@ -10,14 +10,15 @@ from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)
 
-# No persistent compilation cache in the tests (unless the caller sets
-# CAUSTICS_JAX_COMPILATION_CACHE): on 2026-11-30 three `make test` runs each lost one xdist
-# worker to a segfault inside JAX's executable serialisation (`executable.serialize()` in
-# `compilation_cache.put_executable_and_time`, twice) or deserialisation (once), on a walk
-# program and on photon-differential programs; not reproduced by a single process writing
-# (and reading) the same programs (docs/solvers.md "Compilation"). The tests' own compile
-# counts use JAX's in-process cache, which this leaves as it is.
-os.environ.setdefault("CAUSTICS_JAX_COMPILATION_CACHE", "0")
+# One persistent compilation cache per test process (xdist's PYTEST_XDIST_WORKER), kept
+# between runs: no two test processes share a directory. On 2026-11-30 a worker crashed twice
+# (segfault inside JAX's cache read, and once its write) while another process used the same
+# directory, although `caustics_jax.compilation` bounds the cache so that JAX locks it; a
+# sequential write-then-read of the same programs did not crash (docs/solvers.md).
+if "CAUSTICS_JAX_COMPILATION_CACHE" not in os.environ:
+    _base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    os.environ["CAUSTICS_JAX_COMPILATION_CACHE"] = os.path.join(
+        _base, "caustics_jax", "jax-tests", os.environ.get("PYTEST_XDIST_WORKER", "main"))
 
 # Examples are whole batches (arrays), so few examples cover many cases; derandomised in CI
 # so a failure reproduces.
