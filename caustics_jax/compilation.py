@@ -16,12 +16,7 @@ bounded (`MAX_BYTES`, least recently used entries evicted) unless the user set
 `jax_compilation_cache_max_size`; a bound also makes JAX lock the directory (`filelock`)
 around every read and write. Unbounded, JAX writes entries without a lock, so a process can
 read a program another one is still writing (two test workers, two runs started
-together): a pytest worker crashed while a second process compiled the same programs. Even
-bounded (locked), a test worker crashed twice on 2026-11-30 inside JAX's cache read (and
-once its write) while another process used the same directory; the cause was not found (a
-sequential write and read of the same programs was fine). The tests therefore use one
-directory per process (tests/conftest.py); processes that run at the same time can do the
-same with `CAUSTICS_JAX_COMPILATION_CACHE=<own dir>`, or `0`. The cache is
+together): a pytest worker crashed while a second process compiled the same programs. The cache is
 trusted code: keep it in a directory only you can write (JAX's warning for
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 """
