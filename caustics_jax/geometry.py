@@ -72,7 +72,7 @@ def refract(
     cos_i = dot(N, I)[..., None]
     k = refraction_k(cos_i, eta)
     transmits = k >= 0
-    sqrt_k = _safe_sqrt(k)
+    sqrt_k = safe_sqrt(k)
     out = eta * I - (eta * cos_i + sqrt_k) * N
     return jnp.where(transmits, out, jnp.zeros_like(out))
 
@@ -82,8 +82,9 @@ def safe_div(x, y, ok):
     return jnp.where(ok, x / jnp.where(ok, y, 1), 0)
 
 
-def _safe_sqrt(x):
-    """sqrt of `max(x, 0)` whose gradient stays finite at and below zero."""
+def safe_sqrt(x):
+    """sqrt of `max(x, 0)` whose gradient stays finite at and below zero (double where):
+    the one copy, used by the kernels and the photon differentials too."""
     positive = x > 0
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1)), 0)
 
@@ -101,7 +102,7 @@ def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*ba
     cos_i = jnp.clip(jnp.abs(cos_i), 0, 1)
     eta = jnp.asarray(eta, dtype=cos_i.dtype)
     cos_t2 = refraction_k(cos_i, eta)
-    cos_t = _safe_sqrt(cos_t2)
+    cos_t = safe_sqrt(cos_t2)
     den_s = eta * cos_i + cos_t
     den_p = cos_i + eta * cos_t
     ok = (cos_t2 > 0) & (den_s > 0) & (den_p > 0)

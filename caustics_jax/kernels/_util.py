@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..arguments import check_int, check_real
+from ..geometry import safe_sqrt  # noqa: F401  (the kernels use it under this name)
 
 
 def float_dtype(*xs):
@@ -110,9 +111,3 @@ def safe_div(num, den):
     """`num / den`, and 0 (value and gradient finite) where `den == 0`."""
     ok = den != 0
     return jnp.where(ok, num / jnp.where(ok, den, 1), 0)
-
-
-def safe_sqrt(x):
-    """sqrt of `max(x, 0)` with a finite gradient at and below zero."""
-    ok = x > 0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1)), 0)

@@ -40,7 +40,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._precision import float_inputs
 from ..barycentric import barycentric_coordinates, interpolated_normal
-from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize
+from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize, safe_sqrt
 from ..mesh import SurfaceMesh
 from ..objectives import orthonormal_frame
 from .differentials import validity_threshold
@@ -57,12 +57,6 @@ def triangle_area(x0, x1, x2) -> Float[Array, "*batch"]:
 def _edge_area(e1, e2):
     """Alg. 2's `TriArea` of the triangle spanned by the edges `e1, e2`."""
     return norm(jnp.cross(e1, e2)) / 2
-
-
-def _sqrt_nonneg(k):
-    """`sqrt(max(k, 0))` with a finite gradient at and below 0 (the double where of `refract`)."""
-    pos = k > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, k, 1)), 0)
 
 
 def _scatter_pair(l0, n0, l1, n1, eta, mode):
@@ -93,7 +87,7 @@ def _scatter_pair(l0, n0, l1, n1, eta, mode):
         r0, r1 = refract(l0, n0, e), refract(l1, n1, e)
         k0, k1 = refraction_k(c0, e), refraction_k(c1, e)
         ok = (eta > 0) & (k0 >= 0) & (k1 >= 0)  # k < 0: total internal reflection, no ray
-        s0, s1 = _sqrt_nonneg(k0), _sqrt_nonneg(k1)
+        s0, s1 = safe_sqrt(k0), safe_sqrt(k1)
         ds = safe_div(e * e * dc * (c0 + c1), s0 + s1, s0 + s1 > 0)
         dr = e[..., None] * dl - (e * c1 + s1)[..., None] * dn - (e * dc + ds)[..., None] * n0
     # normalize: w1 - w0 = dr / m1 - r0 (m1 - m0) / (m0 m1), m1 - m0 = dr.(r0 + r1) / (m0 + m1)
@@ -126,7 +120,7 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     ok = ok10 & ok01 & (A > 0) & (t_hit > 0)
     ratio = safe_div(A_d, A, ok)
     ok = ok & jnp.isfinite(ratio)  # areas overflow beyond arguments.scale_range (float32 1e10 m): invalid
-    sigma = _sqrt_nonneg(jnp.where(ok, ratio, 0)) * jnp.asarray(scale, A.dtype) ** level
+    sigma = safe_sqrt(jnp.where(ok, ratio, 0)) * jnp.asarray(scale, A.dtype) ** level
     ok = ok & jnp.isfinite(sigma)
     return jnp.where(ok, sigma, 0), ok
 
@@ -349,8 +343,8 @@ def footprint_ellipse(dY_du: Float[Array, "*batch 2"], dY_dv: Float[Array, "*bat
     half_trace, diff = (a + c) / 2, (a - c) / 2
     q = diff**2 + b**2
     round_ = q > 0  # False at a circle: double eigenvalue, sqrt and arctan2 have no derivative
-    root = _sqrt_nonneg(q)
-    s1 = _sqrt_nonneg(half_trace + root)
+    root = safe_sqrt(q)
+    s1 = safe_sqrt(half_trace + root)
     det = jnp.abs(Js[..., 0, 0] * Js[..., 1, 1] - Js[..., 0, 1] * Js[..., 1, 0])
     s2 = jnp.minimum(safe_div(det, s1, s1 > 0), s1)
     theta = 0.5 * jnp.where(round_, jnp.arctan2(jnp.where(round_, 2 * b, 0), jnp.where(round_, a - c, 1)), 0)
