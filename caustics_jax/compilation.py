@@ -14,10 +14,9 @@ JAX caches only programs that took at least `jax_persistent_cache_min_compile_ti
 (1 s by default) to compile, i.e. the solvers, not the small eager kernels. The cache is
 bounded (`MAX_BYTES`, least recently used entries evicted) unless the user set
 `jax_compilation_cache_max_size`; a bound also makes JAX lock the directory (`filelock`)
-around every read and write. Unbounded, JAX writes entries without a lock, so a process can
-read a program another one is still writing (two test workers, two runs started
-together): a pytest worker crashed while a second process compiled the same programs. The cache is
-trusted code: keep it in a directory only you can write (JAX's warning for
+around every read and write. Unbounded, JAX writes entries without a lock, so a process
+could read a program another one is still writing (two test workers, two runs started
+together). The cache is trusted code: keep it in a directory only you can write (JAX's warning for
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 """
 
