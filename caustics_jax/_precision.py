@@ -196,17 +196,36 @@ def _check_shape(fn_name: str, name: str, shape, dims) -> tuple | None:
     return tuple(shape[len(head):len(shape) - len(tail)]) if dims[v] == "*batch" else None
 
 
+def check_domain(fn_name: str, name: str, value, *, strict: bool) -> None:
+    """Refuse a concrete parameter that is not finite, or not `> 0` (`strict`) / `>= 0`,
+    with a ValueError naming `fn_name` and `name`; a tracer (inside jit) passes unchecked."""
+    if isinstance(value, jax.core.Tracer):
+        return
+    v = np.asarray(value)
+    if v.size == 0:
+        return
+    bad = ~np.isfinite(v) | ((v <= 0) if strict else (v < 0))
+    if np.any(bad):
+        shown = v[bad].reshape(-1)[:3].tolist()
+        raise ValueError(f"{fn_name}: {name} must be finite and {'> 0' if strict else '>= 0'}, got {shown}"
+                         + (" (eta_in / eta_out, water 1.333)" if name == "eta" else ""))
+
+
 def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ...] = (),
-                 dtype_arg: str | None = None):
+                 dtype_arg: str | None = None, positive: tuple[str, ...] = (),
+                 nonnegative: tuple[str, ...] = ()):
     """Decorator: the input contract of a public kernel, applied at its entry.
 
     `arrays` name the float data arguments (they set the dtype), `params` the float
     parameters (cast to it), `ints` the integer arguments (indices, ids), by the rules
     above; `dtype_arg` names an explicit `dtype=` argument that sets the result dtype
     instead. Shapes given as jaxtyping annotations (`Float[Array, "*batch 3"]`) are
-    checked, and the `*batch` shapes must broadcast. Violations raise `ValueError`
-    naming the function and argument; `None` arguments are left alone. Works on
-    concrete arrays and on tracers (inside jit it only casts).
+    checked, and the `*batch` shapes must broadcast. `positive` and `nonnegative` name
+    params with a physical domain (an index ratio `eta > 0`, an extinction `sigma_t >= 0`):
+    concrete values outside it, or not finite, are refused (`check_domain`). Violations
+    raise `ValueError` naming the function and argument; `None` arguments are left alone.
+    Works on concrete arrays and on tracers (inside jit it only casts: a kernel with a
+    validity output marks such lanes invalid itself, docs/input_contract.md).
     """
 
     def decorate(fn):
@@ -219,6 +238,9 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
         for n in (*arrays, *params, *ints, *([dtype_arg] if dtype_arg else [])):
             if n not in sig.parameters:
                 raise TypeError(f"float_inputs: {fn.__qualname__} has no argument {n!r}")
+        for n in (*positive, *nonnegative):
+            if n not in params:
+                raise TypeError(f"float_inputs: {fn.__qualname__}: {n!r} has a domain but is not a param")
         fn_name = fn.__name__
 
         @functools.wraps(fn)
@@ -242,6 +264,8 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
                     continue
                 if n in params:
                     real_input_dtype(f"{fn_name}: {n}", a[n])
+                    if n in positive or n in nonnegative:
+                        check_domain(fn_name, n, a[n], strict=n in positive)
                 a[n] = jnp.asarray(a[n], dtype)
                 if dims.get(n):
                     batch = _check_shape(fn_name, n, a[n].shape, dims[n])
@@ -275,7 +299,7 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
                 raise ValueError(f"{fn_name}: input shapes do not broadcast ({shapes})") from None
 
         wrapper.input_contract = {"arrays": arrays, "params": params, "ints": ints,
-                                  "dtype_arg": dtype_arg}
+                                  "dtype_arg": dtype_arg, "positive": positive, "nonnegative": nonnegative}
         return wrapper
 
     return decorate

@@ -57,7 +57,7 @@ def refraction_k(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     return (1 - eta) * (1 + eta) + (eta * cos_i) ** 2
 
 
-@float_inputs("I", "N", params=("eta",))
+@float_inputs("I", "N", params=("eta",), positive=("eta",))
 def refract(
     I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"], eta
 ) -> Float[Array, "*batch 3"]:
@@ -89,7 +89,7 @@ def safe_sqrt(x):
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1)), 0)
 
 
-@float_inputs("cos_i", params=("eta",))
+@float_inputs("cos_i", params=("eta",), positive=("eta",))
 def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     """Exact unpolarised dielectric Fresnel reflectance (the `F` of seed 001 eq. 25).
 
@@ -111,7 +111,7 @@ def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*ba
     return jnp.where(ok, (r_s**2 + r_p**2) / 2, 1)
 
 
-@float_inputs("cos_i", params=("eta",))
+@float_inputs("cos_i", params=("eta",), positive=("eta",))
 def fresnel_transmittance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     """Exact unpolarised dielectric Fresnel transmittance `1 - R` (energy, not radiance)."""
     return 1 - fresnel_reflectance(cos_i, eta)

@@ -52,7 +52,7 @@ def refracted_direction(V, N, P, L, ab, eta):
     return refract(-w_P, -n_s, eta)
 
 
-@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
 def signed_sine_and_status(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],
@@ -134,7 +134,7 @@ def _sine(V, N, P, L, ab, eta) -> _Sine:
     return _Sine(M, n_s, w_L, r, c, degenerate, status)
 
 
-@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
 def signed_sine(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],
@@ -167,7 +167,7 @@ def orthonormal_frame(n: Float[Array, "*batch 3"]):
     return s, t
 
 
-@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
 def half_vector_residual(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],
@@ -200,7 +200,7 @@ def _spherical_angles(d, n_s):
     return theta, phi
 
 
-@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
 def angle_difference_residual(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],

@@ -232,6 +232,75 @@ def test_an_empty_batch_gives_an_empty_result(name):
         assert out.shape[:1] == (0,)
 
 
+# Physical parameters of the transport kernels: their domain is declared in the contract
+# (`float_inputs(positive=..., nonnegative=...)`), concrete values outside it are refused.
+DOMAINS = {"eta": "positive", "intensity": "nonnegative", "sigma_t": "nonnegative"}
+
+
+def _domain_cases():
+    for name in sorted(KERNELS):
+        fn, _ = KERNELS[name]
+        contract = getattr(fn, "input_contract", None)
+        for param in (contract or {}).get("params", ()):
+            if param in DOMAINS:
+                yield name, param
+
+
+def test_every_eta_intensity_and_sigma_t_parameter_declares_its_domain():
+    cases = list(_domain_cases())
+    assert len(cases) >= 15, cases
+    for name, param in cases:
+        contract = KERNELS[name][0].input_contract
+        assert param in contract[DOMAINS[param]], f"{name}: {param} must be declared {DOMAINS[param]}"
+
+
+@pytest.mark.parametrize("name, param", list(_domain_cases()), ids=lambda x: str(x))
+def test_a_parameter_outside_its_physical_domain_is_refused_naming_it(name, param):
+    """eta <= 0 gave ray_differential_D valid lanes (D 4.0 at eta 0), a negative sigma_t an
+    amplified irradiance, a negative intensity a negative one, all marked valid."""
+    fn, args = KERNELS[name]
+    index = list(inspect.signature(fn).parameters).index(param)
+    bad_values = [-1.0, float("nan"), float("inf"), np.array([1.0, -2.0])]
+    if DOMAINS[param] == "positive":
+        bad_values.append(0.0)
+    for bad in bad_values:
+        call, kwargs = list(args), {}
+        if index < len(args):
+            call[index] = bad
+        else:
+            kwargs[param] = bad
+        with pytest.raises(ValueError, match=rf"{name.split('.')[-1]}: {param} must be finite and"):
+            fn(*call, **kwargs)
+
+
+@pytest.mark.parametrize("name", ["ray_differential_D", "path_irradiance", "texel_jacobian",
+                                  "photon_differential_irradiance", "compression_ratio",
+                                  "compression_ratio_exact"])
+def test_a_traced_parameter_outside_its_domain_gives_invalid_finite_lanes(name):
+    """Inside jit the values are unknown at the boundary: the kernel marks those lanes invalid
+    (its last output) with finite values, and keeps a valid lane valid."""
+    fn, args = KERNELS[name]
+    params = list(inspect.signature(fn).parameters)
+    for param in [p for p in fn.input_contract["params"] if p in DOMAINS]:
+        index = params.index(param)
+        good = args[index] if index < len(args) else inspect.signature(fn).parameters[param].default
+        values = jnp.asarray([good, -1.0, float("nan")] + ([0.0] if DOMAINS[param] == "positive" else []))
+
+        def lane(v, param=param, index=index):
+            call, kwargs = list(args), {}
+            if index < len(args):
+                call[index] = v
+            else:
+                kwargs[param] = v
+            return fn(*call, **kwargs)
+
+        out = _leaves(jax.jit(jax.vmap(lane))(values))
+        valid = out[-1]
+        assert valid.dtype == bool and valid[0] and not valid[1:].any(), (param, valid)
+        for leaf in out:
+            assert np.all(np.isfinite(leaf)), (param, leaf)
+
+
 def test_integer_arrays_never_truncate_eta_the_issue_examples():
     # Float input: a ray along +x onto a +z normal is grazing, and eta > 1 makes it TIR:
     # k = 1 - eta^2 (1 - 0) < 0, so refract returns the zero vector (GLSL semantics).

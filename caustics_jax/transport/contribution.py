@@ -49,7 +49,8 @@ from .differentials import ray_differential_D
 from .visibility import path_visible
 
 
-@float_inputs("V", "N", "P", "L", "ab", "receiver_normal", params=("eta", "intensity", "sigma_t"))
+@float_inputs("V", "N", "P", "L", "ab", "receiver_normal", params=("eta", "intensity", "sigma_t"),
+               positive=("eta",), nonnegative=("intensity", "sigma_t"))
 @jax.jit
 def path_irradiance(
     V: Float[Array, "*batch 3 3"],
@@ -68,6 +69,8 @@ def path_irradiance(
     `receiver_normal` is normalised here. Returns `(E, valid)`; `E = 0` where `valid` is
     False (`ray_differential_D` invalid: TIR, grazing, degenerate) and where the receiver
     faces away from the arriving light (there `valid` stays True: the irradiance is 0).
+    `eta > 0`, `intensity >= 0`, `sigma_t >= 0`: concrete values outside are refused
+    (`ValueError`), traced ones give invalid lanes.
     """
     _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
     dtype = w_P.dtype
@@ -76,7 +79,9 @@ def path_irradiance(
     T = fresnel_transmittance(dot(w_L, n_s), 1 / eta)
     cos_P = jnp.maximum(-dot(w_P, safe_normalize(jnp.asarray(receiver_normal, dtype))), 0)
     A = jnp.exp(-jnp.asarray(sigma_t, dtype) * norm(P - barycentric_point(V, ab)))
-    ok = valid & (D > 0)
+    # intensity and sigma_t are checked when concrete (float_inputs); traced, a lane outside
+    # their domain (or NaN) is invalid.
+    ok = valid & (D > 0) & (jnp.asarray(intensity, dtype) >= 0) & (jnp.asarray(sigma_t, dtype) >= 0)
     E = eta**2 * T * A * cos_P * jnp.asarray(intensity, dtype) / jnp.where(ok, D, 1)
     return jnp.where(ok, E, 0), ok
 

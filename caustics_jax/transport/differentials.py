@@ -76,7 +76,7 @@ def _triangle_ok(E1, E2, tiny):
     return norm(jnp.cross(E1, E2)) > tiny * norm(E1) * norm(E2)
 
 
-@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
 @jax.jit
 def ray_differential_D(
     V: Float[Array, "*batch 3 3"],
@@ -107,7 +107,8 @@ def ray_differential_D(
     (`w_P.n_s >= 0`), the refraction is total internal reflection, or `w_L` does not
     leave on the light side (`w_L.n_s <= sqrt(eps)`); "nearly" means a sine or cosine
     below `sqrt(eps)` of the dtype; also where `D` overflows (not finite, or 0 through an
-    overflowed intermediate: a scene beyond `arguments.scale_range`).
+    overflowed intermediate: a scene beyond `arguments.scale_range`). A concrete `eta <= 0`
+    is refused (`ValueError`); a traced one gives invalid lanes.
     """
     M, n_s, w_P, w_L, degenerate = path_vectors(V, N, P, L, ab)
     dtype = M.dtype
@@ -124,7 +125,8 @@ def ray_differential_D(
     # refract(-w_P, -n_s, eta) needs P behind the shading normal (GLSL's dot(N, I) <= 0);
     # with the normal facing the other way GLSL's formula reflects instead (at eta = 1
     # exactly), so such a path is not the refraction that eq. 29-31 differentiate.
-    valid = ~degenerate & _triangle_ok(E1, E2, tiny) & ok_g & ok_L & (cos_P < 0) & (k > 0)
+    # eta > 0: checked when concrete (float_inputs); a traced eta outside it is an invalid lane.
+    valid = ~degenerate & _triangle_ok(E1, E2, tiny) & ok_g & ok_L & (cos_P < 0) & (k > 0) & (eta > 0)
 
     # Both differentials at once: axis -2 holds (w_perp, w_par); [..., None] broadcasts
     # per-path scalars over it, [..., None, :] per-path vectors.
@@ -179,7 +181,7 @@ def _autodiff_D_one(V, N, P, L, ab, eta):
 _autodiff_D_vectorized = jnp.vectorize(_autodiff_D_one, signature="(3,3),(3,3),(3),(3),(2),()->()")
 
 
-@float_inputs("V", "N", "P", "L", "ab", params=("eta",))
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
 @jax.jit
 def autodiff_D(
     V: Float[Array, "*batch 3 3"],

@@ -39,6 +39,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._precision import float_inputs
+from ..arguments import check_int, check_points, check_real, real_array
 from ..barycentric import barycentric_coordinates, interpolated_normal
 from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize, safe_sqrt
 from ..mesh import SurfaceMesh
@@ -126,7 +127,7 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
 
 
 @float_inputs("x00", "x10", "x01", "n00", "n10", "n01", "l_dir", "t_hit", "l_dir10", "l_dir01",
-               params=("eta", "scale", "level"))
+               params=("eta", "scale", "level"), positive=("eta", "scale"))
 def compression_ratio(
     x00: Float[Array, "*batch 3"], x10: Float[Array, "*batch 3"], x01: Float[Array, "*batch 3"],
     n00: Float[Array, "*batch 3"], n10: Float[Array, "*batch 3"], n01: Float[Array, "*batch 3"],
@@ -189,7 +190,7 @@ def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir
 
 
 @float_inputs("x00", "x10", "x01", "n00", "n10", "n01", "l_dir", "receiver_point",
-               "receiver_normal", "l_dir10", "l_dir01", params=("eta",))
+               "receiver_normal", "l_dir10", "l_dir01", params=("eta",), positive=("eta",))
 def compression_ratio_exact(
     x00, x10, x01, n00, n10, n01, l_dir, receiver_point, receiver_normal, *, eta=1.333,
     mode: str = "refract", l_dir10=None, l_dir01=None,
@@ -255,7 +256,7 @@ _texel_vectorized = jnp.vectorize(
     _texel_one, signature="(3,3),(3,3),(3),(3),(),(3),(3)->(2,2),(3),(),(),(),(),()")
 
 
-@float_inputs("V", "N", "L", "X", "receiver_point", "receiver_normal", params=("eta",))
+@float_inputs("V", "N", "L", "X", "receiver_point", "receiver_normal", params=("eta",), positive=("eta",))
 @jax.jit
 def texel_jacobian(
     V: Float[Array, "*batch 3 3"], N: Float[Array, "*batch 3 3"], L: Float[Array, "*batch 3"],
@@ -284,7 +285,8 @@ def texel_jacobian(
 
 
 @float_inputs("V", "N", "L", "X", "receiver_point", "receiver_normal",
-               params=("eta", "intensity", "sigma_t"))
+               params=("eta", "intensity", "sigma_t"), positive=("eta",),
+               nonnegative=("intensity", "sigma_t"))
 @jax.jit
 def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, receiver_normal,
                                    sigma_t=0.0):
@@ -302,8 +304,11 @@ def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, r
     J, Y, T, cos_e, r_e, t, ok = texel_jacobian(V, N, L, X, eta, receiver_point, receiver_normal)
     det = jnp.abs(J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0])
     scale = jnp.sum(J**2, axis=(-2, -1))
-    ok = ok & (det > validity_threshold(det.dtype) * scale)
     dtype = det.dtype
+    # intensity and sigma_t are checked when concrete (float_inputs); traced, a lane outside
+    # their domain (or NaN) is invalid.
+    ok = (ok & (det > validity_threshold(dtype) * scale) & (jnp.asarray(intensity, dtype) >= 0)
+          & (jnp.asarray(sigma_t, dtype) >= 0))
     E = (jnp.asarray(intensity, dtype) * T * jnp.exp(-jnp.asarray(sigma_t, dtype) * t) * jnp.abs(cos_e)
          * safe_div(1, r_e**2 * det, ok))
     return jnp.where(ok, E, 0), Y, ok
@@ -374,6 +379,12 @@ def _splat(xy, flux, cov, origin, cell, window, nx, ny):
     return out[:-1].reshape(ny, nx)
 
 
+#: Largest `window` of `splat_footprints`: each photon touches `(2 window + 1)^2` cells.
+MAX_SPLAT_WINDOW = 64
+#: Largest `res` of `light_view_texels` (`res^2` photons: 2^28 at the bound).
+MAX_TEXELS = 1 << 14
+
+
 def splat_footprints(xy, flux, J, du: float, dv: float, receiver: ReceiverGrid, *,
                      kappa: float = 0.7, window: int = 6) -> np.ndarray:
     """Irradiance map from photons splatted as anisotropic Gaussians (seed 003 footprints).
@@ -390,10 +401,23 @@ def splat_footprints(xy, flux, J, du: float, dv: float, receiver: ReceiverGrid, 
     but blurred less than asked). The receiver plane must be horizontal (`J` in x, y).
     Returns `(ny, nx)` irradiance (W/m^2).
     """
-    receiver = ReceiverGrid(*receiver)
-    receiver.validate()
+    receiver = ReceiverGrid.check(receiver)
+    kappa = check_real("kappa", kappa, 0, lo_open=True)
+    window = check_int("window", window, 0, MAX_SPLAT_WINDOW)
+    du, dv = check_real("du", du, 0, lo_open=True), check_real("dv", dv, 0, lo_open=True)
+    xy_np, flux_np, J_np = real_array("xy", xy), real_array("flux", flux), real_array("J", J)
+    n = xy_np.shape[0] if xy_np.ndim == 2 else -1
+    if xy_np.shape != (n, 2) or flux_np.shape != (n,) or J_np.shape != (n, 2, 2):
+        raise ValueError(f"xy, flux and J must have shapes (N, 2), (N,) and (N, 2, 2), got {xy_np.shape}, "
+                         f"{flux_np.shape} and {J_np.shape}")
+    for name, a in (("xy", xy_np), ("flux", flux_np), ("J", J_np)):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite (pass the valid photons only)")
+    if np.any(flux_np < 0):
+        raise ValueError("flux must be >= 0")
     xy = jnp.asarray(xy)
-    dtype = xy.dtype
+    dtype = xy.dtype if jnp.issubdtype(xy.dtype, jnp.floating) else jnp.result_type(float)
+    xy = xy.astype(dtype)
     JD = jnp.asarray(J, dtype) * jnp.asarray([du, dv], dtype)[None, None, :]
     cell = jnp.asarray([receiver.dx, receiver.dy], dtype)
     cov = kappa**2 * JD @ jnp.swapaxes(JD, -1, -2) + jnp.diag(cell**2 / 12)
@@ -425,9 +449,12 @@ def light_view_texels(mesh: SurfaceMesh, L, res: int) -> LightViewTexels:
     The caustic-map texels of seed 004 §3.1 (Alg. 2 takes its neighbours `x10, x01` from
     adjacent texels), on a `photons.EmissionPlane`.
     """
-    if res < 2:
-        raise ValueError(f"res must be >= 2, got {res}")
-    L_np = np.asarray(L, np.float64).reshape(3)
+    if not isinstance(mesh, SurfaceMesh):
+        raise ValueError(f"mesh must be a SurfaceMesh, got {type(mesh).__name__}")
+    res = check_int("res", res, 2, MAX_TEXELS)
+    L_np = check_points("L", L, mesh.dtype)
+    if L_np.shape != (3,):
+        raise ValueError(f"L must be one point, shape (3,), got {L_np.shape}")
     plane = EmissionPlane.covering(mesh, L_np)
     du, dv = (plane.x1 - plane.x0) / res, (plane.y1 - plane.y0) / res
     x = plane.x0 + (np.arange(res) + 0.5) * du

@@ -132,6 +132,39 @@ def test_bad_mode_raises():
         light_view_texels(scenes.flat_pool(128, dtype=jnp.float64).surface, [0, 0, 3.0], 1)
 
 
+_SPLAT = dict(xy=np.zeros((2, 2)), flux=np.ones(2), J=np.tile(np.eye(2), (2, 1, 1)), du=0.1, dv=0.1,
+              receiver=ReceiverGrid(-1.0, -1.0, 1.0, -1.0, 1.0, 8, 8))
+
+
+@pytest.mark.parametrize("change, name", [
+    (dict(kappa=-0.7), "kappa"), (dict(kappa=0.0), "kappa"), (dict(kappa=float("nan")), "kappa"),
+    (dict(window=-1), "window"), (dict(window=2.5), "window"), (dict(window=10**6), "window"),
+    (dict(du=0.0), "du"), (dict(dv=-1.0), "dv"), (dict(xy=np.zeros((2, 3))), "shapes"),
+    (dict(flux=np.ones(3)), "shapes"), (dict(J=np.ones((2, 2))), "shapes"),
+    (dict(xy=np.array([[0.0, np.nan], [0, 0]])), "xy"), (dict(J=np.full((2, 2, 2), np.inf)), "J"),
+    (dict(flux=np.array([1.0, -1.0])), "flux"), (dict(xy=np.zeros((2, 2), bool)), "xy"),
+    (dict(receiver=(0.0, 1.0, -1.0, -1.0, 1.0, 8, 8)), "receiver"), (dict(receiver=None), "receiver"),
+])
+def test_splat_footprints_refuses_bad_input_naming_it(change, name):
+    """Before: a negative window gave an empty map, a negative kappa the same map as its
+    absolute value, NaN photons a NaN map; each is now a ValueError naming the argument."""
+    with pytest.raises(ValueError, match=name):
+        splat_footprints(**{**_SPLAT, **change})
+
+
+@pytest.mark.parametrize("L, name", [([0.0, np.nan, 3.0], "L"), ([0.0, 0.0], "L"), ([[0, 0, 3.0]] * 2, "L"),
+                                     ("up", "L")])
+def test_light_view_texels_refuses_a_bad_light_or_resolution(L, name):
+    mesh = scenes.flat_pool(128, dtype=jnp.float64).surface
+    with pytest.raises(ValueError, match=name):
+        light_view_texels(mesh, L, 8)
+    for res in (1, 2.5, True, 1 << 20):
+        with pytest.raises(ValueError, match="res"):
+            light_view_texels(mesh, [0, 0, 3.0], res)
+    with pytest.raises(ValueError, match="SurfaceMesh"):
+        light_view_texels(np.zeros((3, 3)), [0, 0, 3.0], 8)
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_photon_differential_irradiance_matches_flat_interface_formula(dtype):
     """Forward irradiance at each texel's landing point equals the exact flat-interface value
