@@ -11,6 +11,7 @@ import pytest
 
 import caustics_jax as cj
 import caustics_jax.kernels as K
+import caustics_jax.transport as T
 from caustics_jax import arguments, compare, occlusion, scenes
 from caustics_jax.solvers import _solve
 from caustics_jax.transport.visibility import path_visible
@@ -103,6 +104,7 @@ KERNELS = {
     "kernels.sprite_intensity": (K.sprite_intensity, (np.array(1.0), np.array(1.0), np.array(2.0))),
     "kernels.sprite_size": (K.sprite_size, (4.0, 4.0, 256, 256, 1.0, np.array(2.0))),
     "kernels.schlick_f0": (K.schlick_f0, (np.array(2.0),)),
+    "transport.triangle_area": (T.triangle_area, (np.zeros(3), _X, np.array([0.0, 2, 0]))),
 }
 # Public callables that are not array kernels: static configuration (Python numbers in and
 # out), checked by their own ValueErrors.
@@ -111,19 +113,32 @@ _MESH = cj.SurfaceMesh.from_arrays(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1
                                    np.array([[0, 1, 2], [1, 3, 2]]), dtype="float64")
 
 
+# Public functions of `caustics_jax.transport` that are host-level (they take a mesh, a
+# grid, a generator), not array kernels: each validates its own arguments (tests in
+# tests/transport and below).
+TRANSPORT_HOST = {"irradiance", "photon_irradiance", "sms_biased", "sms_unbiased", "splat_footprints",
+                  "path_visible", "surface_hits", "surface_starts"}
+
+
 def _public_kernels():
     names = {n for n in cj.__all__ if hasattr(getattr(cj, n), "input_contract")}
     names |= {f"kernels.{n}" for n in K.__all__
               if inspect.isfunction(getattr(K, n)) and n not in STATIC}
+    names |= {n if n in cj.__all__ else f"transport.{n}" for n in T.__all__
+              if inspect.isfunction(getattr(T, n)) and n not in TRANSPORT_HOST}
     return names | {"cross_edge"}
+
+
+def _kernel(name):
+    module, _, short = name.rpartition(".")
+    return getattr({"kernels": K, "transport": T, "": cj}[module], short)
 
 
 def test_every_public_kernel_has_a_contract_and_a_case_here():
     assert _public_kernels() == set(KERNELS), "add the kernel to KERNELS (and decorate it with float_inputs)"
     for name in KERNELS:
-        fn = getattr(K, name.split(".")[1]) if name.startswith("kernels.") else getattr(cj, name)
         if name != "kernels.schlick_f0":  # Python float for a Python number, else the contract
-            assert hasattr(fn, "input_contract"), name
+            assert hasattr(_kernel(name), "input_contract"), name
 
 
 def _data_args(name):

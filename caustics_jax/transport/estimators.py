@@ -67,6 +67,11 @@ def surface_starts(mesh: SurfaceMesh, n: int, rng: np.random.Generator) -> Start
     """`n` start points uniform over the surface area: a face with probability proportional
     to its area, then `a = sqrt(u1) (1 - u2)`, `b = sqrt(u1) u2` (uniform in the triangle,
     seed 001 eq. 3 coordinates)."""
+    if not isinstance(mesh, SurfaceMesh):
+        raise ValueError(f"mesh must be a SurfaceMesh, got {type(mesh).__name__}")
+    n = check_int("n", n, 0)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator (np.random.default_rng(seed)), got {rng!r}")
     V = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)]
     area = np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=-1) / 2
     face = rng.choice(len(area), size=n, p=area / area.sum())

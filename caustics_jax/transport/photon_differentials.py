@@ -50,7 +50,9 @@ from .photons import EmissionPlane, ReceiverGrid, refract_into_medium, surface_h
 MODES = ("refract", "reflect")
 
 
-def triangle_area(x0, x1, x2) -> Float[Array, "*batch"]:
+@float_inputs("x0", "x1", "x2")
+def triangle_area(x0: Float[Array, "*batch 3"], x1: Float[Array, "*batch 3"],
+                  x2: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
     """`|(x1 - x0) x (x2 - x0)| / 2` (Alg. 2's `TriArea`)."""
     return _edge_area(x1 - x0, x2 - x0)
 

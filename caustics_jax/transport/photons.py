@@ -163,7 +163,19 @@ def surface_hits(mesh: SurfaceMesh, L, X, *, bvh=None):
 
     The segment runs from `L` past `X` to below the surface's lowest vertex, and
     `start_points`' kernels return the crossing nearest its first end, the light.
+    `L` `(3,)` or `(N, 3)`, `X` `(N, 3)`; concrete input (outside jit) must be finite with
+    every `X` below `L` (a ray that does not go down never meets the surface from above):
+    `ValueError` otherwise.
     """
+    if not isinstance(mesh, SurfaceMesh):
+        raise ValueError(f"mesh must be a SurfaceMesh, got {type(mesh).__name__}")
+    if np.ndim(X) != 2 or np.shape(X)[-1] != 3 or np.shape(L)[-1:] != (3,) or np.ndim(L) > 2:
+        raise ValueError(f"X must have shape (N, 3) and L (3,) or (N, 3), got {np.shape(X)} and {np.shape(L)}")
+    if not isinstance(X, jax.core.Tracer) and not isinstance(L, jax.core.Tracer):
+        X_np, L_np = check_points("X", X, mesh.dtype), check_points("L", L, mesh.dtype)
+        if np.any(np.broadcast_to(X_np[:, 2] >= L_np[..., 2], X_np.shape[:1])):
+            raise ValueError("every X must lie below L (the rays go down from the light)")
+    X, L = jnp.asarray(X, mesh.dtype), jnp.asarray(L, mesh.dtype)
     z_lo = jnp.min(mesh.vertices[:, 2])
     z_hi = jnp.max(mesh.vertices[:, 2])
     d = X - L

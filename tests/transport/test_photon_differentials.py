@@ -447,3 +447,29 @@ def test_footprint_gradients_are_finite_at_a_circle_and_a_singular_J(dtype):
     np.testing.assert_allclose(gd[0], 0, atol=1e-6)
     np.testing.assert_allclose(g1[3], np.diag([1.0, 0.0]), atol=1e-6)
     np.testing.assert_allclose(g2[3], np.diag([0.0, 1.0]), atol=1e-6)
+
+
+def test_surface_hits_and_surface_starts_refuse_bad_input_naming_it():
+    """Exported helpers that validated nothing: a NaN light gave garbage hits, an X above the
+    light a ray going up (never a hit, no error), a negative count numpy's own message."""
+    from caustics_jax.transport import surface_hits, surface_starts
+
+    mesh = scenes.flat_pool(128, dtype=jnp.float64).surface
+    X = np.array([[0.1, 0.2, 1.0], [0.3, 0.1, 1.0]])
+    for L, X_, match in (([0.0, np.nan, 3.0], X, "L has NaN"), ([0.0, 0.0, 3.0], X[:, :2], "shape"),
+                         ([0.0, 0.0, 0.5], X, "below L"), ([0.0, 0.0, 3.0], X * np.inf, "X has NaN")):
+        with pytest.raises(ValueError, match=match):
+            surface_hits(mesh, L, X_)
+    with pytest.raises(ValueError, match="SurfaceMesh"):
+        surface_hits("mesh", [0.0, 0.0, 3.0], X)
+    face, ab, found = surface_hits(mesh, [0.0, 0.0, 3.0], np.array([[0.1, 0.2, 1.0]]))  # lists are fine
+    assert bool(found[0])
+    for n, rng, match in ((-1, np.random.default_rng(0), "n must"), (2.5, np.random.default_rng(0), "n must"),
+                          (4, 0, "numpy.random.Generator")):
+        with pytest.raises(ValueError, match=match):
+            surface_starts(mesh, n, rng)
+    with pytest.raises(ValueError, match="SurfaceMesh"):
+        surface_starts(None, 4, np.random.default_rng(0))
+    # (traced input is left to the caller: inside jit the rays are traced unchecked)
+    hits = jax.jit(lambda L, X: surface_hits(mesh, L, X))(jnp.asarray([0.0, 0.0, 3.0]), jnp.asarray(X))
+    assert np.asarray(hits[2]).all()
