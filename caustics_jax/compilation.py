@@ -18,10 +18,17 @@ around every read and write. Unbounded, JAX writes entries without a lock, so a 
 could read a program another one is still writing (two test workers, two runs started
 together). The cache is trusted code: keep it in a directory only you can write (JAX's warning for
 `jax.config.update("jax_compilation_cache_dir", ...)`).
+
+In memory, every compiled program holds about three memory mappings of the process on
+XLA:CPU until JAX drops it; past Linux's `vm.max_map_count` (65,530 by default) XLA dies
+by SIGSEGV or SIGABRT. A process that compiles tens of thousands of programs (the test
+suite's workers; a long notebook sweeping shapes) calls `release_compiled_programs()`
+between units of work (docs/solvers.md "Compilation").
 """
 
 from __future__ import annotations
 
+import gc
 import os
 from pathlib import Path
 
@@ -66,3 +73,36 @@ def enable_compilation_cache() -> Path | None:
         jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)
     jax.config.update("jax_compilation_cache_dir", str(path))
     return path
+
+
+#: Linux's default `vm.max_map_count`, assumed where /proc/sys/vm cannot be read.
+DEFAULT_MAX_MAP_COUNT = 65530
+
+
+def memory_maps() -> tuple[int, int] | None:
+    """(memory mappings of this process, the kernel's limit `vm.max_map_count`), or None
+    where /proc does not list them (not Linux)."""
+    try:
+        with open("/proc/self/maps", "rb") as maps:
+            count = sum(1 for _ in maps)
+    except OSError:
+        return None
+    try:
+        with open("/proc/sys/vm/max_map_count") as limit:
+            return count, int(limit.read())
+    except (OSError, ValueError):
+        return count, DEFAULT_MAX_MAP_COUNT
+
+
+def release_compiled_programs(fraction: float = 0.5) -> bool:
+    """Drop JAX's in-memory compiled programs (`jax.clear_caches()`) when this process holds
+    more than `fraction` of the memory mappings Linux allows (module docstring); later calls
+    compile again, or load from the persistent cache. Returns whether it released."""
+    if isinstance(fraction, bool) or not isinstance(fraction, int | float) or not 0 < fraction <= 1:
+        raise ValueError(f"fraction must be a real number in (0, 1], got {fraction!r}")
+    maps = memory_maps()
+    if maps is None or maps[0] <= fraction * maps[1]:
+        return False
+    jax.clear_caches()
+    gc.collect()
+    return True

@@ -3,7 +3,6 @@
 Every float32 test builds float32 arrays explicitly; kernels must keep them float32.
 """
 
-import gc
 import os
 
 import jax
@@ -30,32 +29,15 @@ settings.register_profile(
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
-# Every compiled XLA:CPU program holds about three memory mappings of its own (code, data)
-# until JAX drops it, and the suite compiles tens of thousands of programs per worker (each
-# shape of each jitted kernel, each eager op). Near Linux's `vm.max_map_count` (65530 by
-# default) mmap fails inside XLA and the worker dies by SIGSEGV or SIGABRT in whatever it
-# compiles, (de)serialises or runs next (docs/solvers.md "Compilation"). After a module
-# whose worker holds over half the limit, the compiled programs are released
-# (`jax.clear_caches()`; the persistent compilation cache reloads the slow ones).
-def _memory_maps() -> tuple[int, int] | None:
-    """(mappings of this process, the kernel's limit; 65530, Linux's default, where it cannot
-    be read), or None where /proc does not list the mappings (not Linux)."""
-    try:
-        with open("/proc/self/maps", "rb") as maps:
-            count = sum(1 for _ in maps)
-    except OSError:
-        return None
-    try:
-        with open("/proc/sys/vm/max_map_count") as limit:
-            return count, int(limit.read())
-    except (OSError, ValueError):
-        return count, 65530
-
-
+# Every compiled XLA:CPU program holds about three memory mappings until JAX drops it, and
+# the suite compiles tens of thousands of programs per worker (each shape of each jitted
+# kernel, each eager op). Near Linux's `vm.max_map_count` (65530 by default) mmap fails
+# inside XLA and the worker dies by SIGSEGV or SIGABRT in whatever it compiles,
+# (de)serialises or runs next (docs/solvers.md "Compilation"). After a module that leaves
+# its worker above half the limit, the compiled programs are released.
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
     yield
-    maps = _memory_maps()
-    if maps is not None and maps[0] > maps[1] // 2:
-        jax.clear_caches()
-        gc.collect()
+    from caustics_jax.compilation import release_compiled_programs  # (after x64 is on, above)
+
+    release_compiled_programs(0.5)

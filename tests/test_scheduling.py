@@ -245,3 +245,21 @@ def test_compilation_cache_directory_from_the_environment(value, expected, monke
         assert got == tmp_path / "caustics_jax" / "jax"
     else:
         assert (None if got is None else str(got)) == expected
+
+
+@pytest.mark.skipif(compilation.memory_maps() is None, reason="/proc/self/maps: Linux only")
+def test_release_compiled_programs_gives_back_the_memory_mappings():
+    """Each compiled program holds memory mappings until JAX drops it (the cause of the
+    worker crashes of 2026-11-30, docs/solvers.md "Compilation"): 200 programs hold
+    hundreds; released, the count falls back."""
+    before = compilation.memory_maps()[0]
+    for i in range(200):
+        jax.jit(lambda x, i=i: jnp.sin(x) * i)(jnp.ones(i + 1)).block_until_ready()
+    held = compilation.memory_maps()[0]
+    assert held - before > 200, (before, held)
+    assert not compilation.release_compiled_programs(1.0)  # below the whole limit: nothing
+    assert compilation.release_compiled_programs(1e-9)
+    assert compilation.memory_maps()[0] < held - 200
+    for bad in (0, -0.5, 1.5, True, "half"):
+        with pytest.raises(ValueError, match="fraction"):
+            compilation.release_compiled_programs(bad)
