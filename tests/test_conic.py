@@ -346,3 +346,21 @@ def test_a_root_at_a_vertex_belongs_to_both_edges_and_the_window_is_64_eps(dtype
         hit = np.any(valid[:, 0] & (np.abs(t[:, 0] - 1.0) <= 16 * eps), -1)
         assert np.all(hit == kept), (delta, hit.mean())
         assert np.all((t >= 0) & (t <= 1))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_power_of_two_floor_is_exact_over_the_whole_normal_range(dtype):
+    """solve_quadratic's exact scale (bit mask, not frexp/ldexp): `p <= x < 2 p` with `p` a
+    power of two, for x from the smallest normal number to the largest; 0 below."""
+    from caustics_jax.conic import power_of_two_floor
+
+    info = np.finfo(dtype)
+    rng = np.random.default_rng(3)
+    x = np.exp(rng.uniform(np.log(info.tiny), np.log(info.max), 10_000)).astype(dtype)
+    x = np.concatenate([x, [info.tiny, info.max, 1, 2, np.nextafter(dtype(2), dtype(0))]]).astype(dtype)
+    p = np.asarray(power_of_two_floor(jnp.asarray(x)))
+    assert p.dtype == dtype
+    assert np.all(p <= x) and np.all(x / p < 2)  # (x / p is exact: p a power of two)
+    mantissa, _ = np.frexp(p)
+    assert np.all(mantissa == 0.5)  # a power of two
+    assert np.asarray(power_of_two_floor(jnp.asarray(info.smallest_subnormal, dtype))) == 0
