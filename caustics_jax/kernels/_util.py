@@ -7,7 +7,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..arguments import check_int, check_real
-from ..geometry import safe_sqrt  # noqa: F401  (the kernels use it under this name)
 
 
 def float_dtype(*xs):

@@ -13,8 +13,8 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._precision import float_inputs
-from ..geometry import dot, safe_normalize
-from ._util import as_float, check, check_last_axis, float_dtype, ratio_scale, safe_div, safe_sqrt, tan_half
+from ..geometry import dot, safe_normalize, safe_sqrt
+from ._util import as_float, check, check_last_axis, float_dtype, ratio_scale, safe_div, tan_half
 
 #: Search radius cap of seed 000 §3.2 (5 mm, scene units in metres).
 RADIUS_CAP = 5e-3

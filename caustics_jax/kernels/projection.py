@@ -12,8 +12,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from .._precision import float_inputs
-from ..geometry import dot
-from ._util import check_last_axis, float_dtype, ratio_scale, safe_div, safe_sqrt
+from ..geometry import dot, safe_sqrt
+from ._util import check_last_axis, float_dtype, ratio_scale, safe_div
 
 
 @float_inputs("pos_water", "pos_terrain", "dir_refraction")
