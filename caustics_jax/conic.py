@@ -124,7 +124,8 @@ def edge_quadratics(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3"
 def power_of_two_floor(x):
     """`2^floor(log2 x)` for positive normal `x`, from its exponent bits alone (0 for a
     subnormal): dividing by it is exact. Bit masks, where `jnp.frexp`/`ldexp` lower to
-    ~50 and ~35 operations each (a quarter of the walk's program, ~20 quadratics)."""
+    ~50 and ~35 operations each: with the walk's ~20 quadratics the mask removed 681 of its
+    12,602 StableHLO operations and cut its first compile by 15-25% (docs/conic.md)."""
     x = jnp.asarray(x)
     info = jnp.finfo(x.dtype)
     uint = {4: jnp.uint32, 8: jnp.uint64}[x.dtype.itemsize]
