@@ -12,7 +12,11 @@ import numpy as np
 
 
 def enable_x64(enabled: bool = True) -> None:
-    """Turn 64-bit JAX types on (or off) process-wide. Call it once, before any array work."""
+    """Turn 64-bit JAX types on (or off) process-wide. Call it once, before any array work.
+
+    `enabled` is True or False (a string such as "no" is a `ValueError`: `bool("no")` is True)."""
+    if not isinstance(enabled, bool | np.bool_):
+        raise ValueError(f"enable_x64: enabled must be True or False, got {enabled!r}")
     jax.config.update("jax_enable_x64", bool(enabled))
 
 
@@ -165,6 +169,50 @@ def _check_integer(name: str, x):
     return x
 
 
+def _python_ints_beyond_numpy(x) -> bool:
+    """Whether `x` holds only Python ints, some beyond every numpy integer (`[2**70]`:
+    numpy makes it an object array, which `_check_integer` would call "not integers")."""
+    try:
+        v = np.asarray(x)
+    except (TypeError, ValueError):
+        return False
+    return v.dtype == object and v.size > 0 and all(
+        isinstance(e, int) and not isinstance(e, bool) for e in v.reshape(-1))
+
+
+def as_integer_array(name: str, x, *, unsigned: bool = False):
+    """`x` as a JAX integer array, refusing with a ValueError naming `name` what is not
+    integers and concrete values that do not fit the dtype JAX gives them: int32 with x64
+    off (int64 on), uint32 for 32-bit words (`unsigned`, a `UInt32` annotation).
+
+    `jnp.asarray` refuses a Python int out of range (OverflowError) but wraps a numpy one:
+    `np.int64(2**32 + 1)` had become index 1 and `np.uint64(2**32 + 5)` the code 5. A
+    tracer, or a JAX array already of a fitting dtype, passes as it is.
+    """
+    kind = "32-bit words" if unsigned else "indices"
+    if isinstance(x, jax.core.Tracer) or (
+            isinstance(x, jax.Array) and (not unsigned or jnp.issubdtype(x.dtype, jnp.unsignedinteger))):
+        return _check_integer(name, x)  # already in a JAX dtype: nothing can wrap
+    dtype = jnp.dtype("uint32") if unsigned else None
+    if _python_ints_beyond_numpy(x):
+        shown = (dtype or jnp.dtype(jax.dtypes.canonicalize_dtype(np.int64))).name
+        raise ValueError(f"{name} must hold integers that fit {shown} ({kind}), got {x!r}")
+    v = np.asarray(_check_integer(name, x))
+    dtype = dtype or jnp.dtype(jax.dtypes.canonicalize_dtype(v.dtype))
+    info = np.iinfo(dtype)
+    bad = (v < info.min) | (v > info.max)
+    if np.any(bad):
+        raise ValueError(f"{name} must hold integers that fit {dtype.name} ({kind}, in [{info.min}, "
+                         f"{info.max}]), got {v[bad].reshape(-1)[:3].tolist()}")
+    return jnp.asarray(v, dtype)
+
+
+def _unsigned(annotation) -> bool:
+    """Whether a jaxtyping annotation allows unsigned integers only (`UInt32[Array, ...]`)."""
+    dtypes = getattr(annotation, "dtypes", None)
+    return isinstance(dtypes, list | tuple) and bool(dtypes) and all(str(d).startswith("uint") for d in dtypes)
+
+
 def _dims(annotation):
     """Trailing-shape spec of a jaxtyping annotation (`Float[Array, "*batch 3"]`), or None."""
     dim_str = getattr(annotation, "dim_str", None)
@@ -196,24 +244,71 @@ def _check_shape(fn_name: str, name: str, shape, dims) -> tuple | None:
     return tuple(shape[len(head):len(shape) - len(tail)]) if dims[v] == "*batch" else None
 
 
-def check_domain(fn_name: str, name: str, value, *, strict: bool) -> None:
-    """Refuse a concrete parameter that is not finite, or not `> 0` (`strict`) / `>= 0`,
-    with a ValueError naming `fn_name` and `name`; a tracer (inside jit) passes unchecked."""
+# What a domain's name means in a message (docs/input_contract.md "Kernels").
+_DOMAIN_HINTS = {"eta": " (eta_in / eta_out, water 1.333)", "edge": " (edge k joins vertices k and k + 1 mod 3)",
+                 "level": " (a cascade level c)"}
+
+
+def _domain_words(lo, hi, strict: bool, whole: bool, integer: bool) -> str:
+    """`finite and > 0`, `finite, whole and >= 0`, `in [0, 2]` (an integer argument is
+    finite and whole)."""
+    if lo is not None and hi is not None:
+        bound = [f"in [{lo:g}, {hi:g}]"]
+    elif lo is not None:
+        bound = [f"{'>' if strict else '>='} {lo:g}"]
+    else:
+        bound = [f"<= {hi:g}"] if hi is not None else []
+    parts = ([] if integer else ["finite"] + (["whole"] if whole else [])) + bound
+    return ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else parts[0]
+
+
+def check_domain(fn_name: str, name: str, value, *, lo=None, hi=None, strict: bool = False,
+                 whole: bool = False, integer: bool = False) -> None:
+    """Refuse a concrete parameter outside its domain with a ValueError naming `fn_name` and
+    `name`: not finite, below `lo` (at `lo` too when `strict`), above `hi`, or (`whole`) not a
+    whole number; a tracer (inside jit) passes unchecked (the kernel uses `in_domain`).
+    `integer`: an integer argument (the message leaves out "finite")."""
     if isinstance(value, jax.core.Tracer):
         return
     v = np.asarray(value)
     if v.size == 0:
         return
-    bad = ~np.isfinite(v) | ((v <= 0) if strict else (v < 0))
+    bad = ~in_domain(v.astype(np.float64), lo=lo, hi=hi, strict=strict, whole=whole, xp=np)
     if np.any(bad):
         shown = v[bad].reshape(-1)[:3].tolist()
-        raise ValueError(f"{fn_name}: {name} must be finite and {'> 0' if strict else '>= 0'}, got {shown}"
-                         + (" (eta_in / eta_out, water 1.333)" if name == "eta" else ""))
+        words = _domain_words(lo, hi, strict, whole, integer)
+        raise ValueError(f"{fn_name}: {name} must be {words}, got {shown}{_DOMAIN_HINTS.get(name, '')}")
+
+
+def in_domain(x, *, lo=None, hi=None, strict: bool = False, whole: bool = False, xp=jnp):
+    """Where `x` lies in the domain of `check_domain` (finite, `>= lo` or `> lo`, `<= hi`, whole):
+    the mask a kernel with a validity output applies to a traced parameter."""
+    ok = xp.isfinite(x)
+    if lo is not None:
+        ok = ok & ((x > lo) if strict else (x >= lo))
+    if hi is not None:
+        ok = ok & (x <= hi)
+    if whole:
+        ok = ok & (xp.floor(x) == x)
+    return ok
+
+
+def _domains(positive, nonnegative, whole, bounds) -> dict:
+    """`name -> check_domain keywords` from `float_inputs`' declarations."""
+    spec: dict[str, dict] = {n: {"lo": 0, "strict": True} for n in positive}
+    for n in nonnegative:
+        spec.setdefault(n, {})["lo"] = 0
+    for n, (lo, hi) in bounds.items():
+        spec.setdefault(n, {}).update(lo=lo, hi=hi)
+    for n in whole:
+        spec.setdefault(n, {})["whole"] = True
+    return spec
 
 
 def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ...] = (),
                  dtype_arg: str | None = None, positive: tuple[str, ...] = (),
-                 nonnegative: tuple[str, ...] = ()):
+                 nonnegative: tuple[str, ...] = (), whole: tuple[str, ...] = (),
+                 bounds: dict[str, tuple[float | None, float | None]] | None = None):
     """Decorator: the input contract of a public kernel, applied at its entry.
 
     `arrays` name the float data arguments (they set the dtype), `params` the float
@@ -221,12 +316,19 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
     above; `dtype_arg` names an explicit `dtype=` argument that sets the result dtype
     instead. Shapes given as jaxtyping annotations (`Float[Array, "*batch 3"]`) are
     checked, and the `*batch` shapes must broadcast. `positive` and `nonnegative` name
-    params with a physical domain (an index ratio `eta > 0`, an extinction `sigma_t >= 0`):
-    concrete values outside it, or not finite, are refused (`check_domain`). Violations
-    raise `ValueError` naming the function and argument; `None` arguments are left alone.
-    Works on concrete arrays and on tracers (inside jit it only casts: a kernel with a
-    validity output marks such lanes invalid itself, docs/input_contract.md).
+    params with a physical domain (an index ratio `eta > 0`, an extinction `sigma_t >= 0`),
+    `whole` params that count (a cascade level), `bounds` maps a param or an integer
+    argument to its closed range `(lo, hi)` (an edge in `[0, 2]`; `None`: unbounded on
+    that side, `(None, None)`: finite only); `positive`, `nonnegative` and `whole` may name
+    integer arguments too. Concrete values outside, or not finite, are refused
+    (`check_domain`).
+    Integer arguments must fit the dtype JAX gives them (`as_integer_array`; uint32 where
+    annotated `UInt32`). Violations raise `ValueError` naming the function and argument;
+    `None` arguments are left alone. Works on concrete arrays and on tracers (inside jit it
+    only casts: a kernel with a validity output marks such lanes invalid itself with
+    `in_domain`, the others document what they do, docs/input_contract.md).
     """
+    domains = _domains(positive, nonnegative, whole, bounds or {})
 
     def decorate(fn):
         sig = inspect.signature(fn)
@@ -238,9 +340,10 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
         for n in (*arrays, *params, *ints, *([dtype_arg] if dtype_arg else [])):
             if n not in sig.parameters:
                 raise TypeError(f"float_inputs: {fn.__qualname__} has no argument {n!r}")
-        for n in (*positive, *nonnegative):
-            if n not in params:
-                raise TypeError(f"float_inputs: {fn.__qualname__}: {n!r} has a domain but is not a param")
+        for n in domains:
+            if n not in params and n not in ints:
+                raise TypeError(f"float_inputs: {fn.__qualname__}: {n!r} has a domain but is not a param or int")
+        unsigned = {n for n in ints if n in hints and _unsigned(hints[n].annotation)}
         fn_name = fn.__name__
 
         @functools.wraps(fn)
@@ -264,8 +367,8 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
                     continue
                 if n in params:
                     real_input_dtype(f"{fn_name}: {n}", a[n])
-                    if n in positive or n in nonnegative:
-                        check_domain(fn_name, n, a[n], strict=n in positive)
+                    if n in domains:
+                        check_domain(fn_name, n, a[n], **domains[n])
                 a[n] = jnp.asarray(a[n], dtype)
                 if dims.get(n):
                     batch = _check_shape(fn_name, n, a[n].shape, dims[n])
@@ -274,11 +377,9 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
             for n in ints:
                 if a[n] is None:
                     continue
-                try:
-                    a[n] = jnp.asarray(_check_integer(f"{fn_name}: {n}", a[n]))
-                except OverflowError:
-                    raise ValueError(f"{fn_name}: {n} must hold integers that fit int32 (indices), "
-                                     f"got {a[n]!r}") from None
+                a[n] = as_integer_array(f"{fn_name}: {n}", a[n], unsigned=n in unsigned)
+                if n in domains:
+                    check_domain(fn_name, n, a[n], integer=True, **domains[n])
                 if dims.get(n):
                     batch = _check_shape(fn_name, n, a[n].shape, dims[n])
                     if batch is not None:
@@ -299,7 +400,8 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
                 raise ValueError(f"{fn_name}: input shapes do not broadcast ({shapes})") from None
 
         wrapper.input_contract = {"arrays": arrays, "params": params, "ints": ints,
-                                  "dtype_arg": dtype_arg, "positive": positive, "nonnegative": nonnegative}
+                                  "dtype_arg": dtype_arg, "positive": positive, "nonnegative": nonnegative,
+                                  "whole": whole, "bounds": dict(bounds or {})}
         return wrapper
 
     return decorate

@@ -23,12 +23,16 @@ from ._precision import float_inputs
 from .geometry import dot
 
 
-@float_inputs("t", ints=("edge",))
+@float_inputs("t", ints=("edge",), bounds={"edge": (0, 2)})
 def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> Float[Array, "*batch 2"]:
     """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (seed 001 eq. 3;
-    table above)."""
+    table above).
+
+    `edge` is 0, 1 or 2: a concrete other value is a `ValueError` (7 and -1 had silently
+    given edge 2); inside jit it is clipped to `[0, 2]`, as `mesh.cross_edge` does.
+    """
     t = jnp.asarray(t)
-    edge = jnp.asarray(edge)
+    edge = jnp.clip(jnp.asarray(edge), 0, 2)
     a = jnp.where(edge == 0, t, jnp.where(edge == 1, 1 - t, 0))
     b = jnp.where(edge == 0, 0, jnp.where(edge == 1, t, t))
     return jnp.stack(jnp.broadcast_arrays(a.astype(t.dtype), b.astype(t.dtype)), axis=-1)

@@ -180,7 +180,11 @@ def solve_quadratic(
     return jnp.where(valid, roots, 0), valid
 
 
-@float_inputs("coef", params=("tol",))
+#: Largest `tol` of `edge_intersections`: a slack for rounding, not a search radius.
+EDGE_TOL_MAX = 1e-2
+
+
+@float_inputs("coef", params=("tol",), bounds={"tol": (0, EDGE_TOL_MAX)})
 def edge_intersections(coef: Float[Array, "*batch 6"], tol: float | None = None):
     """Intersections of the conic with the three edges (seed 001 eq. 22-24, corrected).
 
@@ -190,11 +194,19 @@ def edge_intersections(coef: Float[Array, "*batch 6"], tol: float | None = None)
     `[0, 1]`; `tol` defaults to `64 eps` of the dtype. A root at a vertex therefore appears
     on both edges that meet there; a tangency is one root; an edge lying entirely on the
     conic reports none (the walk treats such degenerate edges by its status codes).
+
+    `tol` is a slack for the roots' rounding, in `[0, EDGE_TOL_MAX]` (1e-2): a clamped root
+    lies up to `tol` of the edge off the conic, so `tol = 1e6` had made every root of the
+    edges' lines a valid intersection, and `tol < 0` or NaN none. A concrete value outside
+    is a `ValueError`; inside jit it is clipped into that range (NaN: the default).
     """
     quad = edge_quadratics(coef)
     t, valid = solve_quadratic(quad[..., 0], quad[..., 1], quad[..., 2])
+    default = 64 * jnp.finfo(coef.dtype).eps
     if tol is None:
-        tol = 64 * jnp.finfo(coef.dtype).eps
+        tol = default
+    else:
+        tol = jnp.where(jnp.isnan(tol), default, jnp.clip(tol, 0, EDGE_TOL_MAX))
     inside = (t >= -tol) & (t <= 1 + tol)
     valid = valid & inside
     return jnp.where(valid, jnp.clip(t, 0, 1), 0), valid

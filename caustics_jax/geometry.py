@@ -6,8 +6,9 @@ compared line by line; `eta` is the ratio incident/transmitted index.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from ._precision import float_inputs
 
@@ -38,6 +39,20 @@ def safe_normalize(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
     length = norm(v)
     inv = jnp.where(length > 0, 1 / jnp.where(length > 0, length, 1), 0)
     return v * inv[..., None]
+
+
+def unit_vector(v: Float[Array, "*batch 3"]) -> tuple[Float[Array, "*batch 3"], Bool[Array, "*batch"]]:
+    """`(v / |v|, ok)` for a direction of any finite length; `ok` False (and zeros) where `v`
+    is zero or not finite.
+
+    `v` is divided by its largest component first, so `|v|` neither under- nor overflows
+    (`safe_normalize` squares it: a float32 receiver normal of length 1e20 or 1e-20 had
+    become the zero vector, and `path_irradiance` 0 marked valid).
+    """
+    m = jnp.max(jnp.abs(v), axis=-1)
+    ok = jnp.isfinite(m) & (m > 0)
+    v = jnp.where(ok[..., None], v, 0)
+    return safe_normalize(v / jax.lax.stop_gradient(jnp.where(ok, m, 1))[..., None]), ok
 
 
 @float_inputs("I", "N")

@@ -67,7 +67,7 @@ def bilateral_weight(
     return w_z * w_pos
 
 
-@float_inputs("rgb", params=("weights",))
+@float_inputs("rgb", params=("weights",), nonnegative=("weights",))
 def luminance(rgb: Float[Array, "*batch 3"], weights=REC709) -> Float[Array, "*batch"]:
     """Luminance `lum(.)` of seed 004 eq. 25-28 as a weighted channel sum (Rec. 709 default)."""
     check_last_axis(rgb, "rgb", 3)

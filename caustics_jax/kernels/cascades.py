@@ -19,14 +19,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._precision import float_inputs
+from .._precision import float_inputs, in_domain
 from ._util import as_float, check, check_last_axis, concrete, float_dtype, safe_div, static_int, static_real
 
 #: Largest thread id of a dispatch: the GLSL port's `int tid` (and Alg. 1's arithmetic) is 32-bit.
 MAX_THREADS = 2**31 - 1
 
 
-@float_inputs("o", "l_dir", params=("z_near", "z_far"))
+@float_inputs("o", "l_dir", params=("z_near", "z_far"), bounds={"z_near": (None, None), "z_far": (None, None)})
 def light_position(
     o: Float[Array, "*batch 3"], l_dir: Float[Array, "*batch 3"], z_near, z_far
 ) -> Float[Array, "*batch 3"]:
@@ -43,7 +43,8 @@ def light_position(
     return jnp.asarray(o, dtype) - jnp.asarray(l_dir, dtype) * jnp.asarray(back)[..., None]
 
 
-@float_inputs(params=("width", "height", "near", "far", "s", "level"), dtype_arg="dtype")
+@float_inputs(params=("width", "height", "near", "far", "s", "level"), dtype_arg="dtype", nonnegative=("level",),
+              whole=("level",), bounds={"near": (None, None), "far": (None, None)})
 def cascade_projection(
     width, height, near, far, s, level, dtype=jnp.float32
 ) -> Float[Array, "4 4"]:
@@ -55,14 +56,14 @@ def cascade_projection(
     would map `near` to `near/(far - near) + 1`; the D3D matrix has `-near/(far - near)`
     there, which is what we use.
 
-    All six parameters may be traced. Outside jit, `far <= near`, a non-positive size and an
-    extent `max(w, h) s^level` beyond the dtype are refused; inside jit (unchecked) such
-    entries are 0, never inf.
+    All six parameters may be traced. Outside jit, `far <= near`, a non-positive size, a
+    level that is negative or not whole (0.5 had given an extent of `s^0.5`), non-finite
+    planes and an extent `max(w, h) s^level` beyond the dtype are refused; inside jit
+    (unchecked) such entries are 0, never inf.
     """
     check(width, "width", lower=0, strict=True)
     check(height, "height", lower=0, strict=True)
     check(s, "s", lower=1)
-    check(level, "level", lower=0)
     n, f = concrete(near), concrete(far)
     if n is not None and f is not None and np.any(f <= n):
         raise ValueError(f"far must exceed near (in {jnp.dtype(dtype).name}), got near={n}, far={f}")
@@ -70,7 +71,8 @@ def cascade_projection(
     if w is not None and h is not None:
         _check_power_fits("cascade_projection", "the extent max(width, height) s^level",
                           np.maximum(w, h), s, level, 1, dtype)
-    scale = as_float(s, dtype) ** as_float(level, dtype)
+    level = as_float(level, dtype)
+    scale = jnp.where(in_domain(level, lo=0, whole=True), as_float(s, dtype) ** level, 0)
     depth = as_float(far, dtype) - as_float(near, dtype)
     zero = jnp.zeros((), dtype)
     one = jnp.ones((), dtype)
@@ -146,7 +148,7 @@ def cascade_thread_counts(ccm0_x: int, ccm0_y: int, s: int, n_levels: int) -> tu
     return (ccm0_x * ccm0_y,) + (ring,) * (n_levels - 1)
 
 
-@float_inputs(params=("s",), ints=("level",), dtype_arg="dtype")
+@float_inputs(params=("s",), ints=("level",), dtype_arg="dtype", nonnegative=("level",))
 def cascade_intensity_scale(
     level: Int[Array, "*batch"], s, dtype=jnp.float32
 ) -> Float[Array, "*batch"]:
@@ -156,14 +158,13 @@ def cascade_intensity_scale(
     area the same on every level. Alg. 3 lines 4-6 loop `for i = 0 to c`, which would
     give `s^(2(c+1))`; the test of flux conservation settles on eq. 7.
 
-    A level whose scale overflows `dtype` (float32, s = 2: above 63) is refused outside
-    jit; inside jit (unchecked) its scale is 0, like a masked lane.
+    A negative level, or one whose scale overflows `dtype` (float32, s = 2: above 63), is
+    refused outside jit; inside jit (unchecked) its scale is 0, like a masked lane.
     """
     check(s, "s", lower=1)
-    check(level, "level", lower=0)
     _check_power_fits("cascade_intensity_scale", "s^(2 level)", 1.0, s, level, 2, dtype)
     s, c = as_float(s, dtype), jnp.asarray(level).astype(dtype)
-    fits = jnp.isfinite(s ** (2 * c))
+    fits = jnp.isfinite(s ** (2 * c)) & (c >= 0)  # a negative level had scaled by s^-2c
     return jnp.where(fits, s ** jnp.where(fits, 2 * c, 0), 0)
 
 
@@ -180,7 +181,8 @@ def cascade_dispatch(
 
     `ccm0_x`, `ccm0_y`, `s`, `n_levels` are static configuration (Python ints). Thread ids
     are 32-bit on the GPU: a configuration of more than `2^31 - 1` threads is refused, and
-    `valid` is decided on `tid` as given (an int64 `2^33 + 1` is past the end, not 1).
+    `valid` is decided on `tid` as given (an int64 `2^33 + 1` is past the end, not 1; with
+    x64 off, where JAX would wrap it to int32, a concrete one is a `ValueError`).
     """
     W = static_int("cascade_dispatch", "ccm0_x", ccm0_x, 1, 2**16)
     H = static_int("cascade_dispatch", "ccm0_y", ccm0_y, 1, 2**16)

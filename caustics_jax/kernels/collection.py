@@ -46,7 +46,8 @@ def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array,
     return jnp.arctan(2 * tan_half(fov_y) / as_float(height_px, dtype))
 
 
-@float_inputs("width", "spread", "t", params=("surface_spread", "roughness_spread"))
+@float_inputs("width", "spread", "t", params=("surface_spread", "roughness_spread"),
+              bounds={"surface_spread": (None, None)})
 def ray_cone_propagate(
     width: Float[Array, "*batch"],
     spread: Float[Array, "*batch"],
@@ -63,7 +64,8 @@ def ray_cone_propagate(
     roughness to an angle is the renderer's, not part of seed 000.
 
     `spread` is a full cone angle in `[0, pi)` (a cone of `pi` or more has no width; `tan`
-    would turn negative); inside jit (unchecked) it is clipped below `pi`.
+    would turn negative); inside jit (unchecked) it is clipped below `pi`. `surface_spread`
+    may be negative (a concave surface narrows the cone) but must be finite.
     """
     check(width, "width", lower=0)
     check(spread, "spread", lower=0, upper=np.pi, upper_open=True)

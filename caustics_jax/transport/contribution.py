@@ -35,11 +35,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._precision import float_inputs
+from .._precision import float_inputs, in_domain
 from ..arguments import check_bool, check_fits, check_points, check_real, real_array
 from ..barycentric import barycentric_coordinates, barycentric_point
 from ..features import check as check_features
-from ..geometry import dot, fresnel_transmittance, norm, safe_normalize
+from ..geometry import dot, fresnel_transmittance, norm, unit_vector
 from ..lanes import compact_index, scatter_lanes
 from ..mesh import SurfaceMesh
 from ..objectives import path_vectors
@@ -66,23 +66,27 @@ def path_irradiance(
     """Irradiance at `P` through refraction point `ab`: `eta^2 T A cos(theta_P) I_e / D`.
 
     Seed 001 eq. 25 with the factors MATH.md §6 says it leaves out (module docstring).
-    `receiver_normal` is normalised here. Returns `(E, valid)`; `E = 0` where `valid` is
-    False (`ray_differential_D` invalid: TIR, grazing, degenerate) and where the receiver
-    faces away from the arriving light (there `valid` stays True: the irradiance is 0).
-    `eta > 0`, `intensity >= 0`, `sigma_t >= 0`: concrete values outside are refused
-    (`ValueError`), traced ones give invalid lanes.
+    `receiver_normal` is normalised here (any finite length, `unit_vector`). Returns
+    `(E, valid)`; `E = 0` where `valid` is False (`ray_differential_D` invalid: TIR,
+    grazing, degenerate; a zero or non-finite `receiver_normal`, which had given `E = 0`
+    valid, as had a float32 one of length 1e20 or 1e-20) and where the receiver faces away
+    from the arriving light (there `valid` stays True: the irradiance is 0). `eta > 0`,
+    `intensity >= 0`, `sigma_t >= 0`, all finite: concrete values outside are refused
+    (`ValueError`), traced ones give invalid lanes (`intensity = inf` had given `E = inf`
+    valid).
     """
     _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
     dtype = w_P.dtype
-    eta = jnp.asarray(eta, dtype)
+    eta, intensity, sigma_t = (jnp.asarray(x, dtype) for x in (eta, intensity, sigma_t))
+    n_P, ok_normal = unit_vector(jnp.asarray(receiver_normal, dtype))
+    # traced parameters outside their domain mark the lane invalid (concrete ones are refused)
+    ok = ok_normal & in_domain(eta, lo=0, strict=True) & in_domain(intensity, lo=0) & in_domain(sigma_t, lo=0)
     D, valid = ray_differential_D(V, N, P, L, ab, eta)
     T = fresnel_transmittance(dot(w_L, n_s), 1 / eta)
-    cos_P = jnp.maximum(-dot(w_P, safe_normalize(jnp.asarray(receiver_normal, dtype))), 0)
-    A = jnp.exp(-jnp.asarray(sigma_t, dtype) * norm(P - barycentric_point(V, ab)))
-    # intensity and sigma_t are checked when concrete (float_inputs); traced, a lane outside
-    # their domain (or NaN) is invalid.
-    ok = valid & (D > 0) & (jnp.asarray(intensity, dtype) >= 0) & (jnp.asarray(sigma_t, dtype) >= 0)
-    E = eta**2 * T * A * cos_P * jnp.asarray(intensity, dtype) / jnp.where(ok, D, 1)
+    cos_P = jnp.maximum(-dot(w_P, n_P), 0)
+    A = jnp.exp(-sigma_t * norm(P - barycentric_point(V, ab)))
+    ok = ok & valid & (D > 0)
+    E = eta**2 * T * A * cos_P * intensity / jnp.where(ok, D, 1)
     return jnp.where(ok, E, 0), ok
 
 

@@ -38,10 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._precision import float_inputs
+from .._precision import float_inputs, in_domain
 from ..arguments import check_int, check_points, check_real, real_array
 from ..barycentric import barycentric_coordinates, interpolated_normal
-from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize, safe_sqrt
+from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize, safe_sqrt, unit_vector
 from ..mesh import SurfaceMesh
 from ..objectives import orthonormal_frame
 from .differentials import validity_threshold
@@ -62,6 +62,31 @@ def _edge_area(e1, e2):
     return norm(jnp.cross(e1, e2)) / 2
 
 
+# A direction within this of unit length (`|v.v - 1|`) is used as given by Alg. 2: a unit
+# vector rounded to float32 (also when cast to float64) is within about 3 eps32 of it.
+_UNIT_SLACK = 16 * float(np.finfo(np.float32).eps)
+
+
+def _light_directions(n00, n10, n01, l_dir, l_dir10, l_dir01):
+    """The normals and light directions of Alg. 2 as unit vectors, and where all six are
+    directions (finite, non-zero).
+
+    Unit input (to `_UNIT_SLACK`) keeps its value exactly: `u + (v - u)` is `v` (the
+    difference is exact), so differences of nearby inputs (`n10 - n00`) keep their digits.
+    Normalising each again moves it by its own rounding, independently of its neighbour's:
+    on float32-rounded inputs that took the float64 ratio's error on 0.1 mm texels from
+    1.5e-9 to 7e-5 (tests/transport/test_photon_differentials.py, the float32 sweep).
+    Other lengths are normalised (`unit_vector`); the derivative is that of `v / |v|`.
+    """
+    out, ok = [], True
+    for v in (n00, n10, n01, l_dir, l_dir10, l_dir01):
+        u, ok_v = unit_vector(v)
+        unit = jnp.abs(dot(v, v) - 1) <= _UNIT_SLACK
+        out.append(u + jax.lax.stop_gradient(jnp.where(unit[..., None], v - u, 0)))
+        ok = ok & ok_v
+    return out, ok
+
+
 def _scatter_pair(l0, n0, l1, n1, eta, mode):
     """`(w0, w1 - w0, ok)`: Alg. 2 lines 1-2 (`normalize(reflect(LDir, n))` or
     `normalize(refract(LDir, n, 1/eta))`) for a ray and its neighbour, the difference
@@ -71,25 +96,29 @@ def _scatter_pair(l0, n0, l1, n1, eta, mode):
     the difference of two unit vectors, `w1 - w0` keeps only `eps / |w1 - w0|` of its
     digits (float32, 0.1 mm texels: 1e-3, docs/irradiance.md). Expanded, every term is of
     the size of the difference. `ok` is False where either ray is totally internally
-    reflected (GLSL `refract` returns 0), has no direction, or `eta <= 0`.
+    reflected (GLSL `refract` returns 0), has no direction, does not arrive from the side
+    its normal faces (`l.n >= 0`: a zero normal or an upward `l_dir` had given `sigma = 1`
+    valid), or `eta` is not finite and `> 0`.
     """
     dl, dn = l1 - l0, n1 - n0
     c0, c1 = dot(n0, l0), dot(n1, l1)
+    arrives = (c0 < 0) & (c1 < 0)
     dc = dot(dn, l1) + dot(n0, dl)  # c1 - c0
     if mode == "reflect":
         # GLSL reflect, r = I - 2 (N.I) N: r1 - r0 = dl - 2 (c1 dn + dc n0)
         r0, r1 = reflect(l0, n0), reflect(l1, n1)
         dr = dl - 2 * (c1[..., None] * dn + dc[..., None] * n0)
-        ok = jnp.ones(dr.shape[:-1], bool)
+        ok = arrives
     else:
         # GLSL refract (MATH.md §1) with e = 1/eta: r = e I - (e c + s) N, s = sqrt(k),
         # k = refraction_k(c, e); so r1 - r0 = e dl - (e c1 + s1) dn - (e dc + ds) n0 with
         # ds = (k1 - k0) / (s1 + s0) and k1 - k0 = e^2 dc (c0 + c1).
         eta = jnp.asarray(eta, l0.dtype)
-        e = safe_div(1, eta, eta > 0)
+        ok_eta = in_domain(eta, lo=0, strict=True)
+        e = safe_div(1, eta, ok_eta)
         r0, r1 = refract(l0, n0, e), refract(l1, n1, e)
         k0, k1 = refraction_k(c0, e), refraction_k(c1, e)
-        ok = (eta > 0) & (k0 >= 0) & (k1 >= 0)  # k < 0: total internal reflection, no ray
+        ok = arrives & ok_eta & (k0 >= 0) & (k1 >= 0)  # k < 0: total internal reflection, no ray
         s0, s1 = safe_sqrt(k0), safe_sqrt(k1)
         ds = safe_div(e * e * dc * (c0 + c1), s0 + s1, s0 + s1 > 0)
         dr = e[..., None] * dl - (e * c1 + s1)[..., None] * dn - (e * dc + ds)[..., None] * n0
@@ -113,23 +142,28 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     # Alg. 2 lines 3-6 on the caustic triangle's edges, hit_i - hit_00 = (x_i - x00) +
     # t' (w_i - w00), not on the hits x + t' w: float32 loses eps |x| / texel in the absolute
     # hits (8e-3 relative at 100 m from the origin with 1 mm texels; docs/irradiance.md).
+    (n00, n10, n01, l_dir, l_dir10, l_dir01), ok = _light_directions(n00, n10, n01, l_dir, l_dir10, l_dir01)
     _, dw10, ok10 = _scatter_pair(l_dir, n00, l_dir10, n10, eta, mode)
     _, dw01, ok01 = _scatter_pair(l_dir, n00, l_dir01, n01, eta, mode)
     dx10, dx01 = x10 - x00, x01 - x00
-    t = t_hit[..., None]
+    # t' <= 0: the receiver is behind the surface, which compression_ratio_exact rejects too;
+    # t' = inf had given sigma 0 valid. Traced scale and level outside their domain: invalid.
+    ok = ok & ok10 & ok01 & in_domain(t_hit, lo=0, strict=True)
+    ok = ok & in_domain(scale, lo=1) & in_domain(level, lo=0, whole=True)
+    t = jnp.where(ok, t_hit, 0)[..., None]
     A = _edge_area(dx10, dx01)
     A_d = _edge_area(dx10 + t * dw10, dx01 + t * dw01)
-    # t' <= 0: the receiver is behind the surface, which compression_ratio_exact rejects too
-    ok = ok10 & ok01 & (A > 0) & (t_hit > 0)
+    ok = ok & (A > 0)
     ratio = safe_div(A_d, A, ok)
     ok = ok & jnp.isfinite(ratio)  # areas overflow beyond arguments.scale_range (float32 1e10 m): invalid
-    sigma = safe_sqrt(jnp.where(ok, ratio, 0)) * jnp.asarray(scale, A.dtype) ** level
+    sigma = safe_sqrt(jnp.where(ok, ratio, 0)) * jnp.where(ok, scale, 1) ** jnp.where(ok, level, 0)
     ok = ok & jnp.isfinite(sigma)
     return jnp.where(ok, sigma, 0), ok
 
 
 @float_inputs("x00", "x10", "x01", "n00", "n10", "n01", "l_dir", "t_hit", "l_dir10", "l_dir01",
-               params=("eta", "scale", "level"), positive=("eta", "scale"))
+               params=("eta", "scale", "level"), positive=("eta",), nonnegative=("level",), whole=("level",),
+               bounds={"scale": (1, None)})
 def compression_ratio(
     x00: Float[Array, "*batch 3"], x10: Float[Array, "*batch 3"], x01: Float[Array, "*batch 3"],
     n00: Float[Array, "*batch 3"], n10: Float[Array, "*batch 3"], n01: Float[Array, "*batch 3"],
@@ -138,13 +172,17 @@ def compression_ratio(
 ) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """Kernel scale `sigma = sqrt(A'/A) s^c` by the same-`t'` shortcut (seed 004 eq. 10-11, Alg. 2).
 
-    `x00, x10, x01` surface points of adjacent texels (eq. 10), `n..` their unit normals
-    (outward, toward the light), `l_dir` the unit light direction (from the light,
-    `l_dir.n < 0`), `t_hit` the centre ray's hit distance `t'`, `scale`/`level` the
-    cascade `s` and `c`. `mode="refract"` (into the medium, index ratio `1/eta`) or
-    `"reflect"` (Alg. 2 as printed). Returns `(sigma, valid)`, `valid` False (and
-    `sigma = 0`) for a degenerate surface triangle, a ray totally internally reflected
-    (as `compression_ratio_exact`), `t_hit <= 0` or `eta <= 0`.
+    `x00, x10, x01` surface points of adjacent texels (eq. 10), `n..` their normals
+    (outward, toward the light), `l_dir` the light direction (from the light,
+    `l_dir.n < 0`), both normalised here (`unit_vector`: unit input is used as given),
+    `t_hit` the centre ray's hit distance `t'`, `scale`/`level` the cascade `s >= 1` and
+    `c`, a whole number `>= 0` (seed 004 eq. 11; `cascade_intensity_scale`).
+    `mode="refract"` (into the medium, index ratio `1/eta`) or `"reflect"` (Alg. 2 as
+    printed). Returns `(sigma, valid)`, `valid` False (and `sigma = 0`) for a degenerate
+    surface triangle, a zero or non-finite normal or light direction, light arriving from
+    behind a normal (`l_dir.n >= 0`), a ray totally internally reflected (as
+    `compression_ratio_exact`), `t_hit` not finite and `> 0`, and (traced; concrete ones
+    are a `ValueError`) `eta`, `scale` or `level` outside their domain.
 
     The caustic triangle is formed from differences (`x10 - x00`, and `w10 - w00` expanded
     in `n10 - n00`, `l_dir10 - l_dir`), so the float32 error scales with the texel, not
@@ -173,10 +211,12 @@ def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir
     # As _compression_ratio, on the receiver triangle's edges: with y_i = x_i + t_i w_i on
     # the plane, y_i - y00 = (x_i - x00) + t_i (w_i - w00) + (t_i - t00) w00 and
     # t_i - t00 = -((x_i - x00).n + t00 (w_i - w00).n) / (w_i.n).
+    (n00, n10, n01, l_dir, l_dir10, l_dir01), ok = _light_directions(n00, n10, n01, l_dir, l_dir10, l_dir01)
+    normal, ok_normal = unit_vector(normal)
     w00, dw10, ok10 = _scatter_pair(l_dir, n00, l_dir10, n10, eta, mode)
     _, dw01, ok01 = _scatter_pair(l_dir, n00, l_dir01, n01, eta, mode)
     t00, hit = _plane_distance(x00 - point, w00, normal)
-    ok = ok10 & ok01 & hit & (t00 > 0)
+    ok = ok & ok_normal & ok10 & ok01 & hit & (t00 > 0)
     edges = []
     for dx, dw in ((x10 - x00, dw10), (x01 - x00, dw01)):
         den = dot(w00 + dw, normal)
@@ -201,17 +241,19 @@ def compression_ratio_exact(
 
     The reference for `compression_ratio`'s same-`t'` shortcut (MATH.md §7): no shared
     `t'`, the caustic triangle lies on the receiver. Arguments as `compression_ratio`,
-    plus the receiver plane `(receiver_point, receiver_normal)`. Returns
-    `(ratio, valid)`; `valid` False where a ray misses the plane (parallel or behind), is
-    totally internally reflected, the surface triangle is degenerate or `eta <= 0`. The
-    receiver triangle is formed from differences, as in `compression_ratio`.
+    plus the receiver plane `(receiver_point, receiver_normal)` (normalised here, any
+    finite length). Returns `(ratio, valid)`; `valid` False where a ray misses the plane
+    (parallel or behind), is totally internally reflected, the surface triangle is
+    degenerate, a normal or direction is zero or not finite, light arrives from behind a
+    normal, or (traced) `eta` is not finite and `> 0`. The receiver triangle is formed from
+    differences, as in `compression_ratio`.
     """
     _check_mode(mode)
     l_dir = jnp.asarray(l_dir)
     l_dir10 = l_dir if l_dir10 is None else jnp.asarray(l_dir10, l_dir.dtype)
     l_dir01 = l_dir if l_dir01 is None else jnp.asarray(l_dir01, l_dir.dtype)
     point = jnp.asarray(receiver_point, l_dir.dtype)
-    normal = safe_normalize(jnp.asarray(receiver_normal, l_dir.dtype))
+    normal = jnp.asarray(receiver_normal, l_dir.dtype)
     return _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01,
                                     point, normal, eta, mode)
 
@@ -239,7 +281,7 @@ def _texel_trace(uv, V, N, L, X, eta, point, normal):
     ok_s = ok_s & (t_x + r_e > 0)  # in front of L
     MV = XV + t_x * d  # M - V0
     n_s = safe_normalize(interpolated_normal(N, barycentric_coordinates(E1, E2, MV)))
-    ok_eta = eta > 0
+    ok_eta = in_domain(eta, lo=0, strict=True)  # traced; concrete ones are refused
     r, T, ok_n = refract_into_medium(d, n_s, jnp.where(ok_eta, eta, 1))
     MP = MV + (V[0] - point)  # M - point
     t, ok_r = _plane_distance(MP, r, normal)
@@ -278,12 +320,14 @@ def texel_jacobian(
     `valid` is False (the other outputs finite, with finite gradients, but meaningless)
     where `X = L`, the ray misses the triangle's plane (parallel, or behind `L`), meets
     the shading normal from below, is totally internally reflected, misses the receiver
-    (parallel or behind), or `eta <= 0`.
+    (parallel or behind), `eta` is not finite and `> 0`, or `receiver_normal` (normalised
+    here, any finite length) is zero or not finite.
     """
     dtype = jnp.asarray(X).dtype
-    normal = safe_normalize(jnp.asarray(receiver_normal, dtype))
-    return _texel_vectorized(V, N, L, X, jnp.asarray(eta, dtype), jnp.asarray(receiver_point, dtype),
-                             normal)
+    normal, ok_normal = unit_vector(jnp.asarray(receiver_normal, dtype))
+    *out, ok = _texel_vectorized(V, N, L, X, jnp.asarray(eta, dtype), jnp.asarray(receiver_point, dtype),
+                                 normal)
+    return (*out, ok & ok_normal)
 
 
 @float_inputs("V", "N", "L", "X", "receiver_point", "receiver_normal",
@@ -308,10 +352,10 @@ def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, r
     scale = jnp.sum(J**2, axis=(-2, -1))
     dtype = det.dtype
     # intensity and sigma_t are checked when concrete (float_inputs); traced, a lane outside
-    # their domain (or NaN) is invalid.
-    ok = (ok & (det > validity_threshold(dtype) * scale) & (jnp.asarray(intensity, dtype) >= 0)
-          & (jnp.asarray(sigma_t, dtype) >= 0))
-    E = (jnp.asarray(intensity, dtype) * T * jnp.exp(-jnp.asarray(sigma_t, dtype) * t) * jnp.abs(cos_e)
+    # their domain (negative, NaN or inf: intensity = inf had given E = inf valid) is invalid.
+    intensity, sigma_t = jnp.asarray(intensity, dtype), jnp.asarray(sigma_t, dtype)
+    ok = ok & (det > validity_threshold(dtype) * scale) & in_domain(intensity, lo=0) & in_domain(sigma_t, lo=0)
+    E = (jnp.where(ok, intensity, 0) * T * jnp.exp(-jnp.where(ok, sigma_t, 0) * t) * jnp.abs(cos_e)
          * safe_div(1, r_e**2 * det, ok))
     return jnp.where(ok, E, 0), Y, ok
 
