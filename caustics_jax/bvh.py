@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ._precision import check_mesh_dtype
 from .crossing import clip_to_box, finite_segments, first_of, triangle_crossing
 from .mesh import SurfaceMesh
 
@@ -40,6 +41,7 @@ class FaceBVH(eqx.Module):
 
 def build_bvh(mesh: SurfaceMesh, leaf_size: int = 4) -> FaceBVH:
     """Build the general path's BVH with numpy (outside jit); O(F log F) time, O(F) memory."""
+    check_mesh_dtype(mesh.dtype)
     V = np.asarray(mesh.vertices, dtype=np.float64)
     T = V[np.asarray(mesh.faces)]  # (F, 3, 3)
     n_faces = len(T)
@@ -74,6 +76,7 @@ def first_hit_bvh(mesh: SurfaceMesh, bvh: FaceBVH, A: Float[Array, "n 3"], B: Fl
                   exclude: Int[Array, " n"] | None = None, *, s_lo: float = 0.0, s_hi: float = 1.0,
                   widen: bool):  # fmt: skip
     """`face_cells.first_hit_cells` (same window, exclusion and returns) by BVH traversal."""
+    check_mesh_dtype(mesh.dtype)
     return _first_hit_bvh(mesh.vertices, mesh.faces, bvh, A, B, exclude, float(s_lo), float(s_hi), widen)
 
 

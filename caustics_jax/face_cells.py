@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ._precision import check_mesh_dtype
 from .crossing import clip_to_box, face_frames, finite_segments, first_of, triangle_crossing
 from .grid import GridLayout
 from .lanes import LANE_CHUNK, map_lanes
@@ -102,6 +103,7 @@ def bin_faces(mesh: SurfaceMesh, *, faces_per_cell: float = FACES_PER_CELL,
     padded by `PAD_ULPS` ulps of the coordinates, meets it. Numpy, O(F log F).
     Returns None when some cell would list more than `max_cell_faces` faces.
     """
+    check_mesh_dtype(mesh.dtype)
     V = np.asarray(mesh.vertices, np.float64)
     F = np.asarray(mesh.faces)
     dtype = np.dtype(mesh.dtype)
@@ -214,6 +216,7 @@ def first_hit_cells(mesh: SurfaceMesh, cells: FaceCells, A: Float[Array, "n 3"],
     `(face, ab, s)`: face -1, `ab = 0`, `s = inf` where there is none. One jitted call
     (the window and `widen` are static).
     """
+    check_mesh_dtype(mesh.dtype)
     if chunk is None:  # small chunks pay on a CPU; an accelerator wants every lane at once
         chunk = cpu_chunk(cells.faces.shape[1]) if jax.default_backend() == "cpu" else max(A.shape[0], 1)
     # The mesh's arrays, not the mesh: its static `grid` would key a compile per layout.

@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._precision import check_mesh_dtype
 from .arguments import real_array
 from .mesh import SurfaceMesh
 
@@ -74,6 +75,8 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
         mesh = mesh.mesh  # a PreparedSurface (caustics_jax.prepare), as solve and irradiance accept
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
+    check_mesh_dtype(mesh.dtype)
+    mesh.check_arrays()
     _check_lights(lights_or_L)
     eps = float(np.finfo(np.dtype(mesh.dtype)).eps)
     N_unit = np.asarray(mesh.normals)  # unit: SurfaceMesh normalises them in float64

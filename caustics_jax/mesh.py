@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._precision import check_float_dtype, default_float_dtype, float_inputs
+from ._precision import check_float_dtype, check_mesh_dtype, default_float_dtype, float_inputs
 from .arguments import check_choice, check_real, real_array
 from .barycentric import edge_barycentric, edge_param_from_vertex_order
 
@@ -232,6 +232,43 @@ class SurfaceMesh(eqx.Module):
     def dtype(self):
         return self.vertices.dtype
 
+    def check_arrays(self) -> SurfaceMesh:
+        """`self` when its arrays are still what the constructors built, else a `ValueError`
+        naming what is wrong: a mesh edited after construction (`eqx.tree_at`, the way to
+        animate heights) is not validated again, and a NaN height or an out-of-range index
+        had surfaced as "P has NaN" or an `IndexError` deep inside. O(V + F) numpy checks:
+        JAX arrays (a numpy array can change in place after `prepare` cached its analysis),
+        shapes, one float dtype, finite vertices and normals, indices in range. `prepare`
+        (so `solve`, `irradiance`, ...) and `features` call it once per mesh object."""
+        fields = {f: getattr(self, f) for f in ("vertices", "faces", "normals", "face_normals", "neighbors",
+                                                "neighbor_edge")}
+        for name, x in fields.items():
+            if not isinstance(x, jax.Array) or isinstance(x, jax.core.Tracer):
+                raise ValueError(f"mesh.{name} must be a concrete JAX array (eqx.tree_at(..., mesh, jnp.asarray(new)) "
+                                 f"edits a mesh), got {type(x).__name__}")
+        n_v, n_f = fields["vertices"].shape[0], fields["faces"].shape[0]
+        shapes = {"vertices": (n_v, 3), "normals": (n_v, 3), "faces": (n_f, 3), "face_normals": (n_f, 3),
+                  "neighbors": (n_f, 3), "neighbor_edge": (n_f, 3)}
+        for name, shape in shapes.items():
+            if fields[name].shape != shape:
+                raise ValueError(f"mesh.{name} must have shape {shape}, got {fields[name].shape}")
+        for name in ("vertices", "normals", "face_normals"):
+            if fields[name].dtype != self.dtype or self.dtype not in (jnp.float32, jnp.float64):
+                raise ValueError(f"mesh.{name} is {fields[name].dtype}: vertices, normals and face_normals "
+                                 "must share one float dtype (float32 or float64; mesh.astype converts all)")
+            bad = np.flatnonzero(~np.all(np.isfinite(np.asarray(fields[name])), axis=-1))
+            if bad.size:
+                raise ValueError(f"mesh.{name} contain NaN or Inf: rows {_name(bad)}")
+        limits = {"faces": (0, n_v - 1), "neighbors": (-1, n_f - 1), "neighbor_edge": (-1, 2)}
+        for name, (lo, hi) in limits.items():
+            x = np.asarray(fields[name])
+            if not np.issubdtype(x.dtype, np.integer):
+                raise ValueError(f"mesh.{name} must hold integer indices, got dtype {x.dtype}")
+            bad = np.flatnonzero(np.any((x < lo) | (x > hi), axis=-1))
+            if bad.size:
+                raise ValueError(f"mesh.{name} out of range [{lo}, {hi}]: rows {_name(bad)}")
+        return self
+
     def triangle(
         self, face: Int[Array, "*batch"]
     ) -> tuple[Float[Array, "*batch 3 3"], Float[Array, "*batch 3 3"]]:
@@ -247,6 +284,7 @@ class SurfaceMesh(eqx.Module):
         float64 and rounded once to the mesh's dtype, normals and adjacency unchanged, a
         `grid` moved with it. Exact when `offset` is a multiple of every vertex
         coordinate's spacing (`frames.local_origin` picks such offsets)."""
+        check_mesh_dtype(self.dtype)  # (else its vertices would come back float32, its normals float64)
         offset = real_array("offset", offset)
         if offset.shape != (3,) or not np.all(np.isfinite(offset)):
             raise ValueError(f"offset must be 3 finite real numbers, got {offset!r}")
@@ -308,6 +346,7 @@ def cross_edge(
     if not all(hasattr(mesh, a) for a in ("neighbors", "neighbor_edge", "dtype")):  # (duck-typed: the export
         raise ValueError(f"cross_edge: mesh must be a caustics_jax.SurfaceMesh (its adjacency), "  # passes arrays)
                          f"got {type(mesh).__name__}")
+    check_mesh_dtype(mesh.dtype)
     face, edge = jnp.asarray(face), jnp.asarray(edge)
     n_faces = mesh.neighbors.shape[0]
     # (inside jit the edge is clipped to [0, 2]; on the host a wrong one is refused, not clipped)

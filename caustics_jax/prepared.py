@@ -1,5 +1,6 @@
 """A surface prepared once for many solves: padded arrays, bounds, static features and the
-start-point acceleration structure (DESIGN.md "Host work happens once per scene").
+start-point acceleration structure (DESIGN.md "Skipping what a scene does not need": the
+analysis runs once per scene, outside jit).
 
 `prepare(mesh)` does the host analysis a solve needs and caches it per mesh object, so
 repeated `solve` / `irradiance` calls on the same mesh do no host analysis at all:
@@ -175,6 +176,6 @@ def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
 def _cached(mesh: SurfaceMesh) -> PreparedSurface:
     """`mesh` analysed and entered in the cache (a `local` mesh too, so that `prepare` of
     it, e.g. by the visibility test, finds the same analysis)."""
-    key, analysis = id(mesh), _Analysis(mesh)
+    key, analysis = id(mesh), _Analysis(mesh.check_arrays())
     _CACHE[key] = (weakref.ref(mesh, lambda _, key=key, cache=_CACHE: cache.pop(key, None)), analysis)
     return PreparedSurface(mesh, analysis)

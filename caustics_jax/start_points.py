@@ -65,6 +65,7 @@ def grid_cells(mesh: SurfaceMesh) -> FaceCells | None:
     (static, so this works on a traced mesh; on concrete arrays only where the vertices
     lie on its cells, `frames.on_exact_cells`), else recognised by `grid.detect_grid` from
     the concrete arrays; None otherwise."""
+    check_mesh_dtype(mesh.dtype)
     if mesh.grid is not None and (isinstance(mesh.vertices, jax.core.Tracer) or on_exact_cells(mesh)):
         return cells_from_layout(grid_layout(mesh.grid), mesh.dtype)  # (a traced mesh's grid is trusted)
     _require_concrete(mesh, "recognising a grid")
@@ -117,6 +118,7 @@ def first_hit(mesh: SurfaceMesh, accel: Accel, A, B, exclude=None, *, s_lo: floa
     `face_cells.first_hit_cells` or `bvh.first_hit_bvh` (same arguments; returns
     `(face, ab, s)`, face -1 and `ab = 0` where there is none). Lanes are padded to their
     size class (`lanes.lane_bucket`), so jit compiles once per class."""
+    check_mesh_dtype(mesh.dtype)
     if isinstance(accel, FaceCells):
         core = first_hit_cells
     elif isinstance(accel, FaceBVH):

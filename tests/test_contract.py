@@ -2,8 +2,10 @@
 input by one rule and refuse bool and complex; every API option is refused with a
 ValueError naming it, before any jitted work; zero lanes give empty results everywhere."""
 
+import importlib
 import inspect
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,8 +15,12 @@ import caustics_jax as cj
 import caustics_jax.kernels as K
 import caustics_jax.transport as T
 from caustics_jax import arguments, compare, occlusion, scenes
+from caustics_jax.bvh import first_hit_bvh
+from caustics_jax.face_cells import bin_faces, first_hit_cells
 from caustics_jax.solvers import _solve
 from caustics_jax.transport.visibility import path_visible
+
+start_points_module = importlib.import_module("caustics_jax.start_points")  # (cj.start_points is the function)
 
 # --------------------------------------------------------------------------- kernels
 # One example per public kernel, arrays integer-valued where the kernel takes float data, so
@@ -707,6 +713,7 @@ def test_zero_lanes_irradiance_start_points_and_photons(pool, feats):
     (lambda: K.sprite_size(4.0, 4.0, 1, 256, 1.0, np.ones(2)), "ccm0_x"),
     (lambda: K.schlick_f0(-1.0), "eta"), (lambda: K.schlick_f0(None), "eta"), (lambda: cj.refract(None, _Z, 1.3), "I"),
     (lambda: cj.precision(None).__enter__(), "precision"), (lambda: cj.precision("x").__enter__(), "precision"),
+    (lambda: cj.enable_x64("no"), "enabled"), (lambda: cj.enable_x64(0), "enabled"),
     (lambda: cj.cross_edge("mesh", 0, 0, 0.5), "mesh"), (lambda: cj.cross_edge(_MESH, 2**40, 0, 0.5), "face"),
     (lambda: compare.CompareConfig(dtypes=None).validate(), "dtypes"),
     (lambda: cj.start_points(_MESH, 2**40, np.ones(3)), "shape"),
@@ -718,24 +725,91 @@ def test_static_configuration_and_missing_arrays_are_value_errors(call, match):
         call()
 
 
+def _mesh_entry_points() -> dict[str, object]:
+    """Every public function (of the package, `transport`, `start_points`, `occlusion`,
+    `bvh`, `face_cells`) that takes a surface mesh as `mesh` or `surface`, by name."""
+    found = {}
+    for name in ("caustics_jax", "caustics_jax.transport", "caustics_jax.start_points", "caustics_jax.occlusion",
+                 "caustics_jax.bvh", "caustics_jax.face_cells"):
+        module = importlib.import_module(name)
+        for attr in module.__all__:
+            fn = getattr(module, attr)
+            if callable(fn) and not isinstance(fn, type):
+                params = inspect.signature(fn).parameters
+                if {"mesh", "surface"} & set(params):
+                    found[attr] = fn
+    return found
+
+
 def test_a_float64_mesh_used_with_x64_off_names_the_cause():
     """A float64 mesh built inside `precision("float64")` and used outside it: every entry
-    point says x64 is off (it had said "P is float32 but the mesh is float64" for float64
-    points, which JAX had silently made float32; README's second example did this)."""
+    point that takes a mesh says x64 is off (it had said "P is float32 but the mesh is
+    float64" for float64 points, which JAX had silently made float32; README's second
+    example did this; `cross_edge`, `features`, the start-point structures and
+    `mesh.translated` had run on, casting some arrays and not others). The list of entry
+    points is read from the modules, so a new one without a case here fails."""
     with cj.precision("float64"):
         scene = scenes.wavy_pool(128, dtype="float64")
         mesh = scene.surface
         P = np.asarray(scene.receivers[:4])
         L = np.asarray(scene.lights.endpoint(P))
+        cells, bvh = start_points_module.build_accel(mesh), start_points_module.build_bvh(mesh)
     grid = cj.ReceiverGrid(-1.0, -2, 2, -2, 2, 4, 4)
-    calls = [
-        lambda: cj.solve(mesh, P, L), lambda: cj.prepare(mesh), lambda: cj.start_points(mesh, P, L),
-        lambda: cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0, 0, 1]),
-        lambda: cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid, n_photons=16),
-        lambda: occlusion.segment_blocked(mesh, P, L),
-        lambda: path_visible(mesh, P, (P + L) / 2, L),
-    ]
+    opts = dict(intensity=1.0, receiver_normal=[0, 0, 1], seed=0)
+    cases = {
+        "solve": lambda: cj.solve(mesh, P, L), "prepare": lambda: cj.prepare(mesh),
+        "start_points": lambda: cj.start_points(mesh, P, L), "features": lambda: cj.features(mesh),
+        "cross_edge": lambda: cj.cross_edge(mesh, 0, 0, 0.5),
+        "irradiance": lambda: cj.irradiance(mesh, P, L, intensity=1.0, receiver_normal=[0, 0, 1]),
+        "photon_irradiance": lambda: cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid, n_photons=16),
+        "sms_biased": lambda: cj.sms_biased(mesh, P, L, k=2, **opts),
+        "sms_unbiased": lambda: cj.sms_unbiased(mesh, P, L, **opts),
+        "segment_blocked": lambda: occlusion.segment_blocked(mesh, P, L),
+        "path_visible": lambda: path_visible(mesh, P, (P + L) / 2, L),
+        "surface_hits": lambda: T.surface_hits(mesh, L[0], P),
+        "surface_starts": lambda: T.surface_starts(mesh, 4, np.random.default_rng(0)),
+        "build_accel": lambda: start_points_module.build_accel(mesh),
+        "build_bvh": lambda: start_points_module.build_bvh(mesh), "bin_faces": lambda: bin_faces(mesh),
+        "check_segments": lambda: start_points_module.check_segments(mesh, P, L),
+        "first_crossing": lambda: start_points_module.first_crossing(mesh, P, L),
+        "first_hit": lambda: start_points_module.first_hit(mesh, cells, P, L, widen=True),
+        "grid_cells": lambda: start_points_module.grid_cells(mesh),
+        "first_hit_bvh": lambda: first_hit_bvh(mesh, bvh, P, L, None, widen=True),
+        "first_hit_cells": lambda: first_hit_cells(mesh, cells, P, L, None, widen=True),
+        "translated": lambda: mesh.translated([1.0, 0.0, 0.0]),
+    }
+    assert set(_mesh_entry_points()) <= set(cases), set(_mesh_entry_points()) - set(cases)
     with cj.precision("float32"):
-        for call in calls:
+        for call in cases.values():
             with pytest.raises(ValueError, match="jax_enable_x64 is off"):
                 call()
+
+
+def _edited(mesh, field: str, value):
+    return eqx.tree_at(lambda m: getattr(m, field), mesh, value)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda m: _edited(m, "vertices", m.vertices.at[40, 2].set(jnp.nan)),
+     r"mesh.vertices contain NaN or Inf: rows \[40\]"),
+    (lambda m: _edited(m, "normals", m.normals.at[3, 0].set(jnp.inf)), r"mesh.normals contain NaN or Inf: rows \[3\]"),
+    (lambda m: _edited(m, "faces", m.faces.at[0, 0].set(10**6)), r"mesh.faces out of range \[0, 80\]: rows \[0\]"),
+    (lambda m: _edited(m, "neighbors", m.neighbors.at[5, 1].set(-2)), r"mesh.neighbors out of range"),
+    (lambda m: _edited(m, "faces", m.faces.astype(jnp.float32)), "mesh.faces must hold integer indices"),
+    (lambda m: _edited(m, "vertices", m.vertices[:10]), r"mesh.normals must have shape \(10, 3\)"),
+    (lambda m: _edited(m, "normals", m.normals.astype(jnp.float64)), "must share one float dtype"),
+    (lambda m: _edited(m, "vertices", np.array(m.vertices)), "mesh.vertices must be a concrete JAX array"),
+])
+def test_a_mesh_edited_after_construction_is_checked_once_before_use(edit, match):
+    """`eqx.tree_at` (the way to animate a surface) bypasses the constructors' checks. A NaN
+    height had been reported as "P has NaN or Inf", an out-of-range face index as an
+    IndexError inside `features`, and a numpy vertex array changed in place after `prepare`
+    had left its cached analysis stale (NO_CROSSING where a fresh mesh found the path).
+    `prepare` (every solver entry) and `features` check the arrays once per mesh object."""
+    mesh = edit(scenes.wavy_pool(128, dtype="float32").surface)
+    P, L = np.array([[0.1, 0.2, -1.0]]), np.array([[0.4, -0.3, 3.0]])
+    for call in (lambda: cj.solve(mesh, P, L), lambda: cj.features(mesh), lambda: cj.prepare(mesh),
+                 lambda: cj.photon_irradiance(mesh, L[0], intensity=1.0, n_photons=16, chunk=16,
+                                              receiver=cj.ReceiverGrid(-1.0, -1, 1, -1, 1, 4, 4))):
+        with pytest.raises(ValueError, match=match):
+            call()

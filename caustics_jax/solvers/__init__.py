@@ -7,7 +7,7 @@ it is built; `solve(mesh, P, L, method="walk", **options)` is sugar for
 """
 
 from ._solution import Solution, Status
-from ._solve import METHODS, LocalSolve, returns_every_path, solve, solve_local
+from ._solve import METHODS, LocalSolve, check_lanes, returns_every_path, solve, solve_local
 from .exhaustive import Exhaustive, ExhaustiveSolution
 from .newton import Newton
 from .options import SolverOptions, default_tol
@@ -15,4 +15,4 @@ from .trace import Trace
 from .walk import Walk
 
 __all__ = ["METHODS", "Exhaustive", "ExhaustiveSolution", "LocalSolve", "Newton", "Solution", "SolverOptions",
-           "Status", "Trace", "Walk", "default_tol", "returns_every_path", "solve", "solve_local"]
+           "Status", "Trace", "Walk", "check_lanes", "default_tol", "returns_every_path", "solve", "solve_local"]

@@ -168,7 +168,7 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
         start: optional precomputed `start_points(mesh, P, L)` result.
         features: `"auto"` (default: the mesh's `SceneFeatures`), `None` (always the
             general path) or a `SceneFeatures` from `features(mesh)`. Walk and Newton
-            (`n_starts=1`) skip what the scene does not need: lanes whose segment cannot
+            skip what the scene does not need: lanes whose segment cannot
             reach the surface skip the start-point search, lanes without a start point
             skip the solver (`NO_CROSSING`), and on a flat surface the walk's points come
             in closed form (`solvers/flat.py`). Same statuses and points as `None`,
@@ -317,4 +317,4 @@ def _select_fields(mask, a: dict, b: dict) -> dict:
     return {k: jnp.where(mask.reshape(mask.shape + (1,) * (a[k].ndim - 1)), a[k], b[k]) for k in a}
 
 
-__all__ = ["METHODS", "LocalSolve", "empty_solution", "solve", "solve_local", "solver_from"]
+__all__ = ["METHODS", "LocalSolve", "check_lanes", "empty_solution", "solve", "solve_local", "solver_from"]

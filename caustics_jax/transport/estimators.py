@@ -37,12 +37,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arguments import check_eta, check_fits, check_int, check_points, check_real, check_scene_scale
+from .._precision import check_mesh_dtype
+from ..arguments import check_eta, check_fits, check_int, check_real
 from ..lanes import lanes_per_block
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
 from ..prepared import PreparedSurface, prepare
-from ..solvers import solve
+from ..solvers import Newton, check_lanes, solve
 from ..start_points import StartPoint
 from .contribution import check_intensity, check_receiver_normal, path_irradiance
 
@@ -69,6 +70,7 @@ def surface_starts(mesh: SurfaceMesh, n: int, rng: np.random.Generator) -> Start
     seed 001 eq. 3 coordinates)."""
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a SurfaceMesh, got {type(mesh).__name__}")
+    check_mesh_dtype(mesh.dtype)
     n = check_int("n", n, 0)
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator (np.random.default_rng(seed)), got {rng!r}")
@@ -89,10 +91,10 @@ def _forward(mesh, face, ab, P, L, eta):
     return st[:, 0] == ObjectiveStatus.OK
 
 
-def _newton_from(prep: PreparedSurface, P, L, eta, start: StartPoint, options):
+def _newton_from(prep: PreparedSurface, P, L, eta, start: StartPoint, newton: Newton):
     """One Newton solve per lane from `start`; `(found, point, face, ab)` numpy, `found` only
     for forward refraction points."""
-    sol = solve(prep, P, L, eta=eta, method="newton", start=tuple(start), **options)
+    sol = solve(prep, P, L, eta=eta, method=newton, start=tuple(start))
     face, ab = sol.triangle, sol.barycentric
     found = np.asarray(sol.found) & np.asarray(_forward(prep.mesh, jnp.maximum(face, 0), ab, P, L, eta))
     return found, np.asarray(sol.point, np.float64), np.asarray(face), np.asarray(ab)
@@ -111,10 +113,7 @@ def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
     works (a far mesh moved near the origin, `frames.local_origin`)."""
     prep = prepare(mesh)
     dtype = prep.dtype
-    P_np, L_np = check_points("P", P, dtype), check_points("L", L, dtype)
-    check_scene_scale(np.asarray(prep.mesh.vertices), (P_np, L_np), dtype)
-    P = jnp.asarray(prep.to_local(P_np).astype(dtype)).reshape(-1, 3)
-    L = jnp.broadcast_to(jnp.asarray(prep.to_local(L_np).astype(dtype)).reshape(-1, 3), P.shape)
+    P, L = check_lanes(prep.mesh, P, L, prep.origin)  # (N, 3) each, as `solve` takes them
     n = P.shape[0]
     n_P = check_receiver_normal(receiver_normal, n)
     I_e = check_fits("intensity", check_intensity(intensity), dtype)
@@ -140,7 +139,9 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     """Biased SMS: `k` Newton solves per receiver from area-uniform random starts, the
     distinct forward solutions summed (Zeltner et al. 2020 §4.3; module docstring).
     `newton_options` go to
-    `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...)."""
+    `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...); anything else
+    (`method`, `start`) is a `ValueError`."""
+    newton = Newton.from_kwargs(**newton_options)
     k = _check_count("k", k, 1)
     seed = check_int("seed", seed, 0)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
@@ -148,7 +149,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     lane = np.repeat(np.arange(n), k)
     idx = jnp.asarray(lane)
     found, M, face, ab = _newton_from(prep, P[idx], L[idx], eta, surface_starts(prep.mesh, n * k, rng),
-                                      newton_options)
+                                      newton)
     E = np.zeros(n)
     paths = np.zeros(n, np.int64)
     hit = np.nonzero(found)[0]
@@ -173,12 +174,14 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
                  eta: float = 1.333, sigma_t: float = 0.0, max_trials: int = 1000, same_radius: float = 1e-6,
                  **newton_options) -> EstimatorResult:
     """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
-    path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring)."""
+    path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring).
+    `newton_options` as `sms_biased`'s."""
+    newton = Newton.from_kwargs(**newton_options)
     max_trials = _check_count("max_trials", max_trials, 1)
     seed = check_int("seed", seed, 0)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
-    found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton_options)
+    found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton)
     solves = np.ones(n, np.int64)
     trials = np.where(found, 1, 0).astype(np.int64)
     E_path = np.zeros(n)
@@ -200,7 +203,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
         rep = np.repeat(idx, m)
         g = jnp.asarray(rep)
         f_t, M_t, _, _ = _newton_from(prep, P[g], L[g], eta, surface_starts(prep.mesh, rep.size, rng),
-                                      newton_options)
+                                      newton)
         again = (f_t & (np.linalg.norm(M_t - M[rep], axis=-1) <= same_radius)).reshape(idx.size, m)
         first = np.where(again.any(1), again.argmax(1), m)  # misses before the first recurrence
         capped = first >= allowed

@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._precision import check_mesh_dtype
 from ..arguments import check_eta, check_fits, check_int, check_points, check_real
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
@@ -169,6 +170,7 @@ def surface_hits(mesh: SurfaceMesh, L, X, *, bvh=None):
     """
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a SurfaceMesh, got {type(mesh).__name__}")
+    check_mesh_dtype(mesh.dtype)
     if np.ndim(X) != 2 or np.shape(X)[-1] != 3 or np.shape(L)[-1:] != (3,) or np.ndim(L) > 2:
         raise ValueError(f"X must have shape (N, 3) and L (3,) or (N, 3), got {np.shape(X)} and {np.shape(L)}")
     if not isinstance(X, jax.core.Tracer) and not isinstance(L, jax.core.Tracer):
@@ -245,6 +247,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     prep = prepare(mesh)
     mesh = prep.mesh
     receiver = ReceiverGrid.check(receiver, allow_empty=True)
+    check_fits("receiver (z, x0, x1, y0, y1)", receiver[:5], mesh.dtype)  # traced in the mesh's dtype
     n_photons = check_int("n_photons", n_photons, 0, MAX_PHOTONS)
     chunk = check_int("chunk", chunk, 1, 2**24)
     seed = check_int("seed", seed, 0, 2**32 - 1)

@@ -106,13 +106,23 @@ def test_biased_sms_never_exceeds_the_total_and_reaches_it_with_many_starts():
         (sms_unbiased, dict(seed=1.5), r"seed must be an integer in \[0, 2147483647\], got 1.5"),
         (sms_unbiased, dict(seed=True), "seed must be an integer"),
         (sms_biased, dict(k=2, seed="7"), "seed must be an integer"),
+        # solve's own arguments are not Newton options (they had given a TypeError from
+        # solve: "got multiple values for keyword argument 'method'")
+        (sms_biased, dict(k=2, seed=0, method="walk"), r"unknown newton option\(s\) \['method'\]"),
+        (sms_unbiased, dict(seed=0, start=None), r"unknown newton option\(s\) \['start'\]"),
+        # P and L as solve takes them (a (2, 2, 3) P had been flattened to 4 lanes; an L of
+        # 3 lanes for 1 P had given JAX's broadcasting error)
+        (sms_biased, dict(k=2, seed=0, P=np.zeros((2, 2, 3)) - 1), r"P and L must broadcast to \(N, 3\)"),
+        (sms_unbiased, dict(seed=0, L=np.ones((3, 3)), P=np.zeros((2, 3)) - 1), "do not broadcast"),
     ],
 )
 def test_bad_estimator_arguments_raise_value_error(fn, kwargs, match):
     mesh = scenes.flat_pool(64, dtype="float32").surface
-    kwargs = {"intensity": 1.0, "receiver_normal": UP, **kwargs}
+    kwargs = {"intensity": 1.0, "receiver_normal": UP, "P": np.array([[0.0, 0.0, -1.0]]),
+              "L": np.array([[0.0, 0.0, 1.0]]), **kwargs}
+    P, L = kwargs.pop("P"), kwargs.pop("L")
     with pytest.raises(ValueError, match=match):
-        fn(mesh, np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]]), **kwargs)
+        fn(mesh, P, L, **kwargs)
 
 
 def test_estimators_take_a_receiver_normal_of_any_length():

@@ -71,9 +71,12 @@ def test_same_seed_same_map_and_attenuation():
     (dict(n_photons=-1), "n_photons"),  # (0 photons: an all-zero map, tests/test_contract.py)
     (dict(intensity=float("nan")), "intensity"),
     (dict(L=[0, 0]), "shape"),
+    # traced in the mesh's dtype: a float32 receiver plane at -1e39 had been traced at -inf
+    (dict(receiver=ReceiverGrid(-1e39, -1, 1, -1, 1, 4, 4), dtype=jnp.float32),
+     r"receiver \(z, x0, x1, y0, y1\) overflows"),
 ])
 def test_photon_irradiance_rejects_bad_input(kwargs, match):
-    scene = scenes.flat_pool(128, dtype=jnp.float64)
+    scene = scenes.flat_pool(128, dtype=kwargs.pop("dtype", jnp.float64))
     args = dict(L=LIGHT, intensity=1.0, receiver=RECEIVER, n_photons=1024)
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
