@@ -149,8 +149,9 @@ def _check_figure_format(path) -> None:
                          f"{', '.join('.' + k for k in sorted(kinds))}; got {'.' + suffix if suffix else 'none'}")
 
 
-#: Solver lanes per second assumed for the run-time warning (make demo on 2 CPU cores:
-#: 40k-58k solves/s, docs/solvers.md); compile time and the reference come on top.
+#: Solver lanes per second assumed for the run-time warning: a conservative average over the
+#: comparison's configurations (make demo on 2 CPU cores: 22.6k-574k solves/s each, the slow
+#: ones taking most of the time; docs/solvers.md "Comparison"); compile and reference on top.
 SOLVES_PER_S = 40_000
 #: Warn when the solver time alone is expected above this (s).
 LONG_RUN_S = 600
@@ -214,27 +215,27 @@ def _cpu_devices_arg(value: str) -> int | str:
         raise ValueError(f"--cpu-devices must be a positive integer or 'all', got {value!r}") from None
 
 
-def _add_compare_args(p: argparse.ArgumentParser, *, demo: bool) -> None:
+def _add_compare_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default="wavy", metavar="NAME|PATH",
                    help=f"a named scene ({', '.join(sorted(cmp.SCENES))}) or a mesh file trimesh reads "
                         f"({', '.join(cmp.MESH_SUFFIXES)}): floor and light placed around it as documented "
                         "in caustics_jax.compare.scene_from_mesh")
-    p.add_argument("--triangles", type=int, default=8192, help="surface tessellation")
-    p.add_argument("--n", type=int, default=100_000, help="receiver lanes")
+    p.add_argument("--triangles", type=int, default=8192, help="surface tessellation (default: %(default)s)")
+    p.add_argument("--n", type=int, default=100_000, help="receiver lanes (default: %(default)s)")
     p.add_argument("--dtype", nargs="+", default=["float32", "float64"],
-                   choices=["float32", "float64"])
+                   choices=["float32", "float64"], help="precisions to run (default: both)")
     p.add_argument("--configs", nargs="+", default=list(cmp.DEFAULT_CONFIGS),
-                   help=f"solver configurations, of {sorted(cmp.CONFIGS)}")
+                   help=f"solver configurations, of {sorted(cmp.CONFIGS)} (default: {' '.join(cmp.DEFAULT_CONFIGS)})")
     p.add_argument("--ref-n", type=int, default=1024,
-                   help="lanes checked against the exhaustive reference (0: none)")
-    p.add_argument("--sweep-n", type=int, default=8192, help="lanes per Pareto sweep point")
+                   help="lanes checked against the exhaustive reference (0: none; default: %(default)s)")
+    p.add_argument("--sweep-n", type=int, default=8192, help="lanes per Pareto sweep point (default: %(default)s)")
     p.add_argument("--no-sweep", action="store_true", help="skip the tolerance sweep and figure")
-    p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement")
+    p.add_argument("--repeats", type=int, default=2, help="timed calls per measurement (default: %(default)s)")
     p.add_argument("--cpu-devices", default=None, metavar="N|all",
                    help="split the CPU into N JAX devices ('all': one per core, at most 8) so every core runs lanes "
                         "(default: JAX's one CPU device; `make demo` passes 'all')")
-    p.add_argument("--eta", type=float, default=1.333)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--eta", type=float, default=1.333, help="eta_in / eta_out (default: %(default)s, water)")
+    p.add_argument("--seed", type=int, default=0, help="receiver and reference seed (default: %(default)s)")
     p.add_argument("--json", default=None, help="write the full results as JSON to this path (default: none)")
     p.add_argument("--figure", default=None,
                    help="write the Pareto figure (PNG) to this path (default: none)")
@@ -286,6 +287,10 @@ def _export(args) -> int:
     if kernels is None and scenes is None:  # nothing named: everything
         kernels, scenes = list(export.KERNELS), list(export.SCENES)
     kernels, scenes = kernels or [], scenes or []  # one group named: only that one
+    if not kernels and not scenes:  # (`--scenes none` alone had written 0 files and exited 0)
+        print("caustics-jax export: nothing to export: the selection names no kernel and no scene "
+              "(`--scenes none` alone exports no kernel either; name the kernels, or 'all')", file=sys.stderr)
+        return 2
     if args.count >= 4 and all(k in export.KERNELS for k in kernels):  # else export() says what is wrong
         warning = export_size_warning(kernels, args.count, args.lanes, len(scenes))
         if warning:
@@ -323,9 +328,10 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
                    help=f"scenes to export, 'all' or 'none' (default: all of {', '.join(SCENES)}, unless only "
                         "--kernels is given)")
     p.add_argument("--count", type=int, default=256,
-                   help="random + planted records per kernel (a quarter planted); adversarial cases come on top")
-    p.add_argument("--lanes", type=int, default=256, help="lanes per scene")
-    p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes")
+                   help="random + planted records per kernel (a quarter planted; adversarial cases come on "
+                        "top; default: %(default)s)")
+    p.add_argument("--lanes", type=int, default=256, help="lanes per scene (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes (default: %(default)s)")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -340,17 +346,20 @@ def main(argv=None) -> int:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_compare_args(sub.add_parser(
-        "compare", help="solver comparison: table, optional JSON and Pareto figure"), demo=False)
+        "compare", help="solver comparison: table, optional JSON and Pareto figure"))
     _add_compare_args(sub.add_parser(
-        "demo", help="the main job: compare on the default wavy pool (`make demo` writes figures/solver_comparison.*)"),
-        demo=True)
+        "demo", help="the main job, the same as `compare` with its defaults (the default wavy pool); `make demo` "
+                     "adds --cpu-devices all --figure figures/solver_comparison.png "
+                     "--json figures/solver_comparison.json"))
     _add_export_args(sub.add_parser(
         "export", help="reference data for shader tests: <kernel>.json + .bin per kernel, <scene>.json + .bin "
                        "per scene, C headers"))
     conf = sub.add_parser("conformance", help="run the GLSL ports on a Vulkan device against exported data")
     conf.add_argument("data", help="directory written by `caustics-jax export`")
-    conf.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL")
-    conf.add_argument("--scenes", nargs="+", default=None, metavar="SCENE")
+    conf.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL",
+                      help="kernels to check (default: every kernel exported in DATA)")
+    conf.add_argument("--scenes", nargs="+", default=None, metavar="SCENE",
+                      help="scenes to check (default: every scene exported in DATA)")
     conf.add_argument("--json", default=None, help="write the per-kernel and per-scene reports as JSON here")
     try:
         args = parser.parse_args(argv)

@@ -355,6 +355,14 @@ def map_where(fn, need, out, *args, chunk: int):
 MAX_AUTO_CPU_DEVICES = 8
 
 
+def max_cpu_devices() -> int:
+    """The most CPU devices `use_cpu_devices` accepts: `max(64, os.cpu_count())`. More
+    devices than cores only pad every batch further (a block of lanes per device) and
+    compile optimistix Newton once more per device; 1000 had started a 100k-lane
+    comparison padded to 32M lanes."""
+    return max(64, os.cpu_count() or 1)
+
+
 def use_cpu_devices(count: int | str) -> int:
     """Split the host CPU into `count` JAX devices (`"all"`: one per core, `os.cpu_count()`,
     at most `MAX_AUTO_CPU_DEVICES`),
@@ -369,8 +377,10 @@ def use_cpu_devices(count: int | str) -> int:
     a positive integer or `"all"`, or when the CPU backend already started with another
     count (a fresh process is needed)."""
     n = min(os.cpu_count() or 1, MAX_AUTO_CPU_DEVICES) if count == "all" else count
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
-        raise ValueError(f"cpu devices must be a positive integer or 'all', got {count!r}")
+    limit = max_cpu_devices()
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= limit:
+        raise ValueError(f"cpu devices must be a positive integer or 'all', at most {limit} (max(64, the CPU's "
+                         f"{os.cpu_count()} cores): each device holds a block of lanes), got {count!r}")
     # The backend may have started already: then it is accepted below if the count matches.
     with contextlib.suppress(RuntimeError):
         jax.config.update("jax_num_cpu_devices", int(n))

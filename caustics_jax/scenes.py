@@ -25,7 +25,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._precision import check_float_dtype, default_float_dtype
-from .arguments import check_choice, check_int, check_real, real_array
+from .arguments import check_choice, check_fits, check_int, check_real, real_array
 from .mesh import GridInfo, SurfaceMesh
 
 GRAVITY = 9.81
@@ -173,20 +173,17 @@ def wavy_pool(
         f"wavy_pool(n_triangles={2 * g.nx * g.ny}, seed={seed}, amplitude={amplitude}, "
         f"choppiness={choppiness})"
     )
-    if choppiness == 0:
-        mesh = SurfaceMesh.from_heightfield(
-            X[:, 2].reshape(g.ny + 1, g.nx + 1),
-            x0=g.x0,
-            y0=g.y0,
-            dx=g.dx,
-            dy=g.dy,
-            normals=N.reshape(g.ny + 1, g.nx + 1, 3),
-            dtype=dtype,
-        )
-        return _scene(mesh, R, Rn, light, light_position, True, name)
-    # Same connectivity as the grid, but the vertices have moved off it: a general mesh.
-    mesh = SurfaceMesh.from_arrays(X, g.faces(), N, dtype=default_float_dtype(None, dtype))
-    return _scene(mesh, R, Rn, light, light_position, False, name)
+    try:
+        if choppiness == 0:
+            mesh = SurfaceMesh.from_heightfield(X[:, 2].reshape(g.ny + 1, g.nx + 1), x0=g.x0, y0=g.y0, dx=g.dx,
+                                                dy=g.dy, normals=N.reshape(g.ny + 1, g.nx + 1, 3), dtype=dtype)
+        else:  # same connectivity as the grid, but the vertices have moved off it: a general mesh
+            mesh = SurfaceMesh.from_arrays(X, g.faces(), N, dtype=default_float_dtype(None, dtype))
+    except ValueError as exc:  # waves far shorter than a cell: the normals do not fit the faces
+        raise ValueError(f"wavy_pool: waves of amplitude {amplitude:g} m and wavelengths {tuple(wavelength)} m "
+                         f"are not resolved by {2 * g.nx * g.ny} triangles (cells of {abs(g.dx):.3g} m): "
+                         f"{exc}. Use longer waves, a smaller amplitude or more triangles") from None
+    return _scene(mesh, R, Rn, light, light_position, choppiness == 0, name)
 
 
 def lagoon(
@@ -224,7 +221,8 @@ def lagoon(
     size_np = real_array("size", size)
     if size_np.shape != (2,) or not np.all(np.isfinite(size_np)) or np.any(size_np <= 0):
         raise ValueError(f"size must be two finite positive lengths (width, height) in m, got {size!r}")
-    amplitude = _check_waves(amplitude, n_waves, wavelength, time, depth - floor_relief)
+    amplitude = _check_waves(amplitude, n_waves, wavelength, time, depth - floor_relief,
+                             below=f"depth - floor_relief = {depth:g} - {floor_relief:g}, the highest floor")
     light_position = _check_pool(n_triangles, seed, 1.0, depth, n_receivers, 0.0, light, light_position,
                                  dtype, top=amplitude)
     rng = np.random.default_rng(seed)
@@ -288,16 +286,18 @@ def _check_pool(n_triangles, seed, half_size, depth, n_receivers, receiver_jitte
     if pos.shape != (3,) or not np.all(np.isfinite(pos)) or not pos[2] > top:
         raise ValueError(f"light_position must be a finite point (x, y, z) above the water (z > {top:g} m; "
                          f"for a directional light, its direction from the origin), got {light_position!r}")
+    check_fits("light_position", light_position, default_float_dtype(None, dtype))  # (1e39 had become inf in float32)
     return pos
 
 
-def _check_waves(amplitude, n_waves, wavelength, time, depth) -> float:
-    """Gerstner wave arguments: `0 <= amplitude < depth` (receivers stay under water),
-    `n_waves` in [1, 1024], `wavelength = (lo, hi)` with `0 < lo <= hi`, finite `time`."""
+def _check_waves(amplitude, n_waves, wavelength, time, depth, below: str = "the floor depth") -> float:
+    """Gerstner wave arguments: `0 <= amplitude < depth` (receivers stay under water;
+    `below` says what `depth` is), `n_waves` in [1, 1024], `wavelength = (lo, hi)` with
+    `0 < lo <= hi`, finite `time`."""
     depth = check_real("depth", depth, 0, lo_open=True)
     amplitude = check_real("amplitude", amplitude, 0)
     if not amplitude < depth:
-        raise ValueError(f"amplitude must lie in [0, {depth:g}) m (below the floor depth, so the receivers "
+        raise ValueError(f"amplitude must lie in [0, {depth:g}) m (below {below}, so the receivers "
                          f"stay under water), got {amplitude!r}")
     check_int("n_waves", n_waves, 1, 1024)
     lam = real_array("wavelength", wavelength)

@@ -89,6 +89,7 @@ def _one_line_error(capsys, *needles):
     (["--figure", "out.nothing"], "file type is set by the suffix"),
     (["--n", "abc"], "invalid int value"), (["--dtype", "float16"], "invalid choice"),
     (["--cpu-devices", "0"], "positive integer or 'all'"), (["--cpu-devices", "two"], "positive integer or 'all'"),
+    (["--cpu-devices", "100000"], "at most"),
 ])
 @pytest.mark.parametrize("command", ["compare", "demo"])
 def test_compare_user_errors_exit_2_with_one_line_before_the_run(no_run, capsys, command, argv, needle):
@@ -188,3 +189,13 @@ def test_an_empty_path_is_refused_in_one_line(no_run, capsys, tmp_path, monkeypa
     assert cli.main(argv) == 2
     _one_line_error(capsys, f"caustics-jax {argv[0]}: {flag}", "empty path")
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("argv", [["--scenes", "none"], ["--kernels", "none"],
+                                  ["--kernels", "none", "--scenes", "none"]])
+def test_an_export_that_selects_nothing_is_an_error(capsys, tmp_path, argv):
+    """`--scenes none` alone selects no kernel either (as the help says); it had written 0
+    files and exited 0."""
+    assert cli.main(["export", "--out", str(tmp_path / "d"), *argv]) == 2
+    _one_line_error(capsys, "caustics-jax export: nothing to export", "no kernel and no scene")
+    assert not (tmp_path / "d").exists()

@@ -631,3 +631,29 @@ def test_bad_scene_arguments_raise_before_any_work(tmp_path, capsys, monkeypatch
     assert "unknown scene" in capsys.readouterr().err
     assert cli.main(["export", "--out", str(tmp_path), "--scenes", "flat_pool", "--lanes", "0"]) == 2
     assert "lanes" in capsys.readouterr().err
+
+
+def test_the_building_blocks_check_what_export_checks(tmp_path):
+    """`export_kernel` and `export_scene` are public: a count of -5 had been numpy's
+    "negative dimensions are not allowed", counts 0 and 1 were accepted (export needs 4),
+    and a corrupt manifest's `fields` was a TypeError inside numpy."""
+    from caustics_jax.export.scene_registry import SCENES
+    from caustics_jax.export.scene_writer import export_scene
+    for count in (-5, 0, 1, 2.5, True):
+        with pytest.raises(ValueError, match="count must be an integer"):
+            ex.export_kernel(ex.KERNELS["refract"], count, 0)
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        ex.export_kernel(ex.KERNELS["refract"], 8, -1)
+    with pytest.raises(ValueError, match="kernel must be an export Kernel"):
+        ex.export_kernel("refract", 8, 0)
+    spec = next(iter(SCENES.values()))
+    for lanes in (0, -3, 2**20 + 1):
+        with pytest.raises(ValueError, match="lanes must be an integer"):
+            export_scene(spec, lanes, 0)
+    with pytest.raises(ValueError, match="seed"):
+        ex.export(tmp_path, seed=2**64)
+    manifest, raw = ex.export_kernel(ex.KERNELS["refract"], 8, 0)
+    for broken in ({**manifest, "fields": 7}, {**manifest, "fields": [{"name": "x"}]},
+                   {k: v for k, v in manifest.items() if k != "stride"}):
+        with pytest.raises(ValueError, match="malformed manifest"):
+            ex.read_records(broken, raw)

@@ -4,6 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from caustics_jax import scenes
 from caustics_jax.mesh import SurfaceMesh
 from caustics_jax.scenes import flat_pool, lagoon, wavy_pool
 
@@ -106,3 +107,16 @@ def test_float32_scene_is_float32_throughout(name):
               scene.lights.direction]:  # fmt: skip
         assert x.dtype == jnp.float32
     assert scene.lights.endpoint(scene.receivers, 0).dtype == jnp.float32
+
+
+@pytest.mark.parametrize("make, match", [
+    # float32 scenes: the light's position had become inf
+    (lambda: scenes.wavy_pool(8, light_position=(0, 0, 1e39), dtype="float32"), "light_position overflows float32"),
+    # lagoon: the bound is depth - floor_relief, and the message had said "amplitude < 0.01" only
+    (lambda: scenes.lagoon(8, floor_relief=0.99), r"below depth - floor_relief = 1 - 0.99"),
+    # waves far shorter than a cell: the mesh's internal message had been all the user saw
+    (lambda: scenes.wavy_pool(8, wavelength=(1e-9, 1e-9)), "wavy_pool: waves of amplitude .* are not resolved by 8"),
+])
+def test_generator_arguments_name_their_cause(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()

@@ -138,10 +138,17 @@ def _field_view(raw: bytes | np.ndarray, entry: dict, count: int, stride: int) -
 
 
 def read_records(manifest: dict, raw: bytes) -> dict[str, np.ndarray]:
-    """Every field of a `.bin` as a numpy array `(count, *shape)`, using nothing but the manifest."""
-    if len(raw) != manifest["count"] * manifest["stride"]:
-        raise ValueError(f"binary holds {len(raw)} bytes, manifest says {manifest['count']} x {manifest['stride']}")
-    return {e["name"]: _field_view(raw, e, manifest["count"], manifest["stride"]) for e in manifest["fields"]}
+    """Every field of a `.bin` as a numpy array `(count, *shape)`, using nothing but the manifest.
+
+    A manifest without the documented entries (docs/export.md), or whose fields do not fit
+    the records, is a `ValueError` (a corrupt `fields` had been a `TypeError` inside numpy)."""
+    try:
+        if len(raw) != manifest["count"] * manifest["stride"]:
+            raise ValueError(f"binary holds {len(raw)} bytes, manifest says {manifest['count']} x {manifest['stride']}")
+        return {e["name"]: _field_view(raw, e, manifest["count"], manifest["stride"]) for e in manifest["fields"]}
+    except (KeyError, TypeError, IndexError, AttributeError) as exc:
+        raise ValueError(f"malformed manifest (docs/export.md lists its entries): "
+                         f"{type(exc).__name__}: {exc}") from None
 
 
 def load(out_dir, kernel: str) -> tuple[dict, dict[str, np.ndarray]]:

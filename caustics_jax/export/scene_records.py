@@ -102,13 +102,18 @@ def pack_scene(values: dict[str, dict[str, np.ndarray]]) -> tuple[dict, bytes]:
 
 
 def read_scene(manifest: dict, raw: bytes) -> dict[str, dict[str, np.ndarray]]:
-    """Every buffer of a scene file as `{buffer: {field: array}}`, from the manifest alone."""
+    """Every buffer of a scene file as `{buffer: {field: array}}`, from the manifest alone
+    (a malformed manifest is a `ValueError`, as in `records.read_records`)."""
     out = {}
-    for name, e in manifest["buffers"].items():
-        size = e["count"] * e["stride"]
-        if e["offset"] + size > len(raw):
-            raise ValueError(f"scene buffer {name} runs past the end of the file ({len(raw)} bytes)")
-        out[name] = read_records(e, raw[e["offset"]: e["offset"] + size])
+    try:
+        for name, e in manifest["buffers"].items():
+            size = e["count"] * e["stride"]
+            if e["offset"] + size > len(raw):
+                raise ValueError(f"scene buffer {name} runs past the end of the file ({len(raw)} bytes)")
+            out[name] = read_records(e, raw[e["offset"]: e["offset"] + size])
+    except (KeyError, TypeError, IndexError, AttributeError) as exc:
+        raise ValueError(f"malformed scene manifest (docs/export.md lists its entries): {type(exc).__name__}: "
+                         f"{exc}") from None
     return out
 
 

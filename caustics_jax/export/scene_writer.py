@@ -29,6 +29,7 @@ import numpy as np
 
 from .._precision import precision
 from ..arcs import project_to_conic
+from ..arguments import check_int
 from ..conic import conic_coefficients, conic_tangent, edge_quadratics, tangent_to_world
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
@@ -125,7 +126,14 @@ def _stats(x: np.ndarray) -> dict:
 
 
 def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = None):
-    """`(manifest, bytes)` of one scene file with `lanes` lanes (module docstring)."""
+    """`(manifest, bytes)` of one scene file with `lanes` lanes (module docstring); `lanes`
+    in [1, 2^20] and `seed` non-negative, as `export` requires: `ValueError` otherwise."""
+    if not isinstance(spec, SceneSpec):
+        raise ValueError(f"spec must be an export SceneSpec (export.SCENES[name]), got {type(spec).__name__}")
+    lanes = check_int("lanes", lanes, 1, 2**20)
+    seed = check_int("seed", seed, 0, 2**63 - 1)
+    if walk is not None and not isinstance(walk, Walk):
+        raise ValueError(f"walk must be None or a caustics_jax.Walk, got {walk!r}")
     walk = Walk() if walk is None else walk
     rng = np.random.default_rng([seed, zlib.crc32(spec.name.encode())])
     data = spec.build(rng, lanes)

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._precision import precision
+from ..arguments import MAX_INT32, check_int
 from ..progress import progress
 from .cases import split
 from .records import CASES, FORMAT_VERSION, c_header, layout, pack_records, record_fields
@@ -40,7 +41,13 @@ def export_kernel(kernel: Kernel, count: int, seed: int, audit: dict | None = No
     """`(manifest, binary bytes)` for one kernel: `count` random and planted records plus the adversarial set.
 
     `audit` is the float32 audit table (`tolerance.load_audit()`, the package's, when None).
+    `count` at least 4 (a quarter planted, `cases.split`) and `seed` non-negative, as
+    `export` requires: `ValueError` otherwise.
     """
+    if not isinstance(kernel, Kernel):
+        raise ValueError(f"kernel must be an export Kernel (export.KERNELS[name]), got {type(kernel).__name__}")
+    count = check_int("count", count, 4)  # (-5 had been numpy's "negative dimensions are not allowed")
+    seed = check_int("seed", seed, 0, 2**63 - 1)
     audit = load_audit() if audit is None else audit
     rng = np.random.default_rng([seed, zlib.crc32(kernel.name.encode())])
     inputs, case = kernel.generate(rng, count)
@@ -139,7 +146,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     `SCENES` (None: all; default none; as `kernels`), each with `lanes` lanes
     (`scene_writer.export_scene`). Same arguments, same bytes. Raises ValueError, before
     any work, on unknown kernel or scene names, a count below 4, lanes outside
-    [1, 2^20], a negative seed, or an `out_dir` that is empty, a file, lies below a file
+    [1, 2^20], a seed outside [0, 2^63 - 1], or an `out_dir` that is empty, a file, lies below a file
     or cannot be created or written.
     """
     from .scene_registry import SCENES
@@ -147,12 +154,9 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
 
     names = _selection("kernels", kernels, KERNELS, "kernel")
     scene_names = _selection("scenes", scenes, SCENES, "scene")
-    if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 4:
-        raise ValueError(f"count must be an integer >= 4, got {count!r}")
-    if isinstance(lanes, bool) or not isinstance(lanes, int | np.integer) or not 1 <= lanes <= 2**20:
-        raise ValueError(f"lanes must be an integer in [1, 2^20], got {lanes!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    count = check_int("count", count, 4, MAX_INT32)  # (as export_kernel and export_scene check them)
+    lanes = check_int("lanes", lanes, 1, 2**20)
+    seed = check_int("seed", seed, 0, 2**63 - 1)
     if not isinstance(out_dir, str | os.PathLike):
         raise ValueError(f"--out (out_dir) must be a directory path (str or os.PathLike), got {out_dir!r}")
     if not os.fspath(out_dir):  # Path("") is the current directory: an empty --out had written there
