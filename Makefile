@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test figures lint typecheck clean export conformance notebooks docs
+.PHONY: demo test figures figures-vulkan lint typecheck clean export conformance notebooks docs
 
 # The extras of `make notebooks` and `make docs`, installed into the same .venv on first use.
 NB_STAMP   := $(VENV)/.installed-notebooks
@@ -30,18 +30,29 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --hypothesis-profile=ci
 
-# Every experiment's figure (the start-point sweep builds a 1M-triangle scene: minutes).
+# Every experiment's figure and JSON on the CPU (an hour or more: the start-point sweep
+# builds a 1M-triangle scene, the throughput benchmark alone takes ~10 minutes). The GLSL
+# walk against the JAX walk needs a Vulkan device: `make figures-vulkan`.
 figures: $(STAMP)
 	$(PY) -m experiments.conic_curve
 	$(PY) -m experiments.float32_audit
 	$(PY) -m experiments.kernel_approximations
 	$(PY) -m experiments.start_point_throughput
+	$(PY) -m experiments.start_point_device
 	$(PY) -m experiments.irradiance_agreement
+	$(PY) -m experiments.estimators
+	$(PY) -m experiments.visibility
 	$(PY) -m experiments.features_benchmark
 	$(PY) -m experiments.stability
 	$(PY) -m experiments.scaling
 	$(PY) -m experiments.precision_agreement
+	$(PY) -m experiments.exhaustive_cost
+	$(PY) -m experiments.throughput
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
+
+# The GLSL walk on lavapipe (or another Vulkan device) against the JAX walk (docs/export.md).
+figures-vulkan: $(STAMP)
+	$(PY) -m experiments.glsl_throughput
 
 # Execute every notebook headless (nbclient); fails on any cell error. A full run rewrites the
 # executed copies notebooks/*.ipynb; CAUSTICS_JAX_QUICK=1 (what CI runs) uses small lane and

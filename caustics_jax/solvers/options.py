@@ -37,7 +37,7 @@ __all__ = ["MAX_INT32", "SolverOptions", "check_bool", "check_choice", "check_et
 
 def default_tol(dtype) -> float:
     """Default acceptance `|f| <= tol`: 1e-10 in float64, 1e-5 in float32 (the float32
-    audit's noise floor of `f` is about 1e-6, docs/kernels.md)."""
+    audit's noise floor of `f` is about 1e-6, docs/conic.md)."""
     return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
 
 
