@@ -23,13 +23,15 @@ from ._precision import float_inputs
 from .geometry import dot
 
 
-@float_inputs("t", ints=("edge",), bounds={"edge": (0, 2)})
+@float_inputs("t", ints=("edge",), bounds={"edge": (-1, 2)})
 def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> Float[Array, "*batch 2"]:
     """Barycentric `(a, b)` of the point at parameter `t` on edge `edge` (seed 001 eq. 3;
     table above).
 
-    `edge` is 0, 1 or 2: a concrete other value is a `ValueError` (7 and -1 had silently
-    given edge 2); inside jit it is clipped to `[0, 2]`, as `mesh.cross_edge` does.
+    `edge` is 0, 1 or 2, or -1 for no edge (what `mesh.cross_edge` returns on a boundary,
+    so its outputs chain: the point of edge 0, finite and meaningless); a concrete other
+    value is a `ValueError` (7 had silently given edge 2); inside jit every value is clipped
+    to `[0, 2]`, as `mesh.cross_edge` does.
     """
     t = jnp.asarray(t)
     edge = jnp.clip(jnp.asarray(edge), 0, 2)

@@ -167,8 +167,8 @@ REFUSED = {  # kernel call with a concrete parameter outside its domain -> the m
     "edge_intersections tol -1": (lambda: cj.edge_intersections(np.ones(6), tol=-1.0), "tol must be"),
     "edge_intersections tol nan": (lambda: cj.edge_intersections(np.ones(6), tol=np.nan), "tol must be"),
     "edge_barycentric edge 7": (lambda: cj.edge_barycentric(np.array([7]), np.array([0.3])),
-                                r"edge_barycentric: edge must be in \[0, 2\]"),
-    "edge_barycentric edge -1": (lambda: cj.edge_barycentric(-1, 0.3), r"edge must be in \[0, 2\]"),
+                                r"edge_barycentric: edge must be in \[-1, 2\]"),
+    "edge_barycentric edge -2": (lambda: cj.edge_barycentric(-2, 0.3), r"edge must be in \[-1, 2\]"),
     "cascade_projection level 0.5": (lambda: K.cascade_projection(512, 512, 1.5, 10.0, 2, 0.5),
                                      "cascade_projection: level must be finite, whole"),
     "cascade_projection near nan": (lambda: K.cascade_projection(512, 512, np.nan, 10.0, 2, 1),
@@ -237,6 +237,8 @@ def test_a_traced_parameter_outside_its_domain_is_an_invalid_finite_lane(name, d
 def test_inside_jit_edge_and_tol_are_clipped_into_their_range():
     """edge 7 and -1 had both given edge 2; tol 1e6 every root of the edges' lines, -1 and NaN none."""
     bary = jax.jit(cj.edge_barycentric)
+    # -1 is cross_edge's "no edge" on a boundary: accepted on the host too, as edge 0
+    np.testing.assert_array_equal(np.asarray(cj.edge_barycentric(-1, 0.3)), np.asarray(cj.edge_barycentric(0, 0.3)))
     for edge, like in ((7, 2), (-1, 0), (3, 2)):
         np.testing.assert_array_equal(np.asarray(bary(edge, 0.3)), np.asarray(cj.edge_barycentric(like, 0.3)))
     coef = np.array([1.0, 1, 0, -3, -3, 2])  # circle through the edges' lines well outside [0, 1]
