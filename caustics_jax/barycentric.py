@@ -29,12 +29,13 @@ def edge_barycentric(edge: Int[Array, "*batch"], t: Float[Array, "*batch"]) -> F
     table above).
 
     `edge` is 0, 1 or 2, or -1 for no edge (what `mesh.cross_edge` returns on a boundary,
-    so its outputs chain: the point of edge 0, finite and meaningless); a concrete other
-    value is a `ValueError` (7 had silently given edge 2); inside jit every value is clipped
-    to `[0, 2]`, as `mesh.cross_edge` does.
+    so its outputs chain: the point of edge 2, finite and meaningless); a concrete other
+    value is a `ValueError` (7 had silently given edge 2); inside jit (unchecked) any value
+    but 0 and 1 gives edge 2's point. (No clip: the walk's program calls this with valid
+    edges, and a clip would only add operations to it.)
     """
     t = jnp.asarray(t)
-    edge = jnp.clip(jnp.asarray(edge), 0, 2)
+    edge = jnp.asarray(edge)
     a = jnp.where(edge == 0, t, jnp.where(edge == 1, 1 - t, 0))
     b = jnp.where(edge == 0, 0, jnp.where(edge == 1, t, t))
     return jnp.stack(jnp.broadcast_arrays(a.astype(t.dtype), b.astype(t.dtype)), axis=-1)

@@ -75,9 +75,15 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
         mesh = mesh.mesh  # a PreparedSurface (caustics_jax.prepare), as solve and irradiance accept
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
-    check_mesh_dtype(mesh.dtype)
     mesh.check_arrays()
+    check_mesh_dtype(mesh.dtype)
     _check_lights(lights_or_L)
+    return mesh_features(mesh)
+
+
+def mesh_features(mesh: SurfaceMesh) -> SceneFeatures:
+    """`features(mesh)` of a mesh whose arrays are already checked (`mesh.check_arrays()`,
+    as `prepare` does before its analysis): the analysis without the checks."""
     eps = float(np.finfo(np.dtype(mesh.dtype)).eps)
     N_unit = np.asarray(mesh.normals)  # unit: SurfaceMesh normalises them in float64
     F = np.asarray(mesh.faces)

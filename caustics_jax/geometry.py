@@ -45,14 +45,17 @@ def unit_vector(v: Float[Array, "*batch 3"]) -> tuple[Float[Array, "*batch 3"], 
     """`(v / |v|, ok)` for a direction of any finite length; `ok` False (and zeros) where `v`
     is zero or not finite.
 
-    `v` is divided by its largest component first, so `|v|` neither under- nor overflows
-    (`safe_normalize` squares it: a float32 receiver normal of length 1e20 or 1e-20 had
-    become the zero vector, and `path_irradiance` 0 marked valid).
+    Where `v . v` would leave the dtype's range (largest component outside `[2^-60, 2^60]`)
+    `v` is divided by its largest component first (`safe_normalize` squares it: a float32
+    receiver normal of length 1e20 or 1e-20 had become the zero vector, and
+    `path_irradiance` 0 marked valid); elsewhere the result, and its derivative, are
+    exactly `safe_normalize(v)`'s.
     """
     m = jnp.max(jnp.abs(v), axis=-1)
     ok = jnp.isfinite(m) & (m > 0)
+    rescale = ok & ((m < 2.0**-60) | (m > 2.0**60))
     v = jnp.where(ok[..., None], v, 0)
-    return safe_normalize(v / jax.lax.stop_gradient(jnp.where(ok, m, 1))[..., None]), ok
+    return safe_normalize(v / jax.lax.stop_gradient(jnp.where(rescale, m, 1))[..., None]), ok
 
 
 @float_inputs("I", "N")

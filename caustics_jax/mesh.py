@@ -237,14 +237,14 @@ class SurfaceMesh(eqx.Module):
         naming what is wrong: a mesh edited after construction (`eqx.tree_at`, the way to
         animate heights) is not validated again, and a NaN height or an out-of-range index
         had surfaced as "P has NaN" or an `IndexError` deep inside. O(V + F) numpy checks:
-        JAX arrays (a numpy array can change in place after `prepare` cached its analysis),
-        shapes, one float dtype, finite vertices and normals, indices in range. `prepare`
-        (so `solve`, `irradiance`, ...) and `features` call it once per mesh object."""
+        concrete arrays (JAX or numpy), shapes, one float dtype, finite vertices and
+        normals, indices in range. `prepare` (so `solve`, `irradiance`, ...) calls it once
+        per mesh object before its analysis, `features` on every call."""
         fields = {f: getattr(self, f) for f in ("vertices", "faces", "normals", "face_normals", "neighbors",
                                                 "neighbor_edge")}
         for name, x in fields.items():
-            if not isinstance(x, jax.Array) or isinstance(x, jax.core.Tracer):
-                raise ValueError(f"mesh.{name} must be a concrete JAX array (eqx.tree_at(..., mesh, jnp.asarray(new)) "
+            if not isinstance(x, jax.Array | np.ndarray) or isinstance(x, jax.core.Tracer):
+                raise ValueError(f"mesh.{name} must be a concrete array (eqx.tree_at(..., mesh, jnp.asarray(new)) "
                                  f"edits a mesh), got {type(x).__name__}")
         n_v, n_f = fields["vertices"].shape[0], fields["faces"].shape[0]
         shapes = {"vertices": (n_v, 3), "normals": (n_v, 3), "faces": (n_f, 3), "face_normals": (n_f, 3),

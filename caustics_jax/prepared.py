@@ -7,7 +7,8 @@ repeated `solve` / `irradiance` calls on the same mesh do no host analysis at al
 
 - `padded`: the mesh padded to power-of-two face and vertex counts (`lanes.padded_mesh`),
   what the jitted solvers take, so jit compiles once per mesh size class;
-- `features`: `features.features(mesh)` (flat closed form, lane compaction);
+- `features`: `features.mesh_features(mesh)`, the flags of `features(mesh)` (flat closed form,
+  lane compaction); `prepare` checks the arrays first (`mesh.check_arrays()`);
 - `lo`, `hi`, `pad`: the float64 bounding box and a conservative margin, to keep lanes
   whose segment cannot reach the surface out of the start-point search;
 - `accel`: the start-point acceleration structure (`start_points.build_accel`: the exact
@@ -30,11 +31,12 @@ import copy
 import warnings
 import weakref
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._precision import check_mesh_dtype
-from .features import SceneFeatures, features
+from .features import SceneFeatures, mesh_features
 from .frames import grid_state, local_mesh, local_origin
 from .lanes import padded_mesh
 from .mesh import SurfaceMesh
@@ -54,7 +56,7 @@ class _Analysis:
                           "rebuild it with SurfaceMesh.from_arrays or from_heightfield, or move it with "
                           "mesh.translated(offset)", stacklevel=4)
         self.padded = padded_mesh(mesh)
-        self.features: SceneFeatures = features(mesh)
+        self.features: SceneFeatures = mesh_features(mesh)
         V = np.asarray(mesh.vertices, np.float64)
         self.lo, self.hi = V.min(0), V.max(0)
         self.pad = 1e-4 * float(np.max(self.hi - self.lo) + np.max(np.abs(V)) + 1)
@@ -160,22 +162,32 @@ _CACHE: dict[int, tuple[weakref.ref, _Analysis]] = {}
 
 
 def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
-    """The `PreparedSurface` of `mesh`, analysed on first use and cached per mesh object."""
+    """The `PreparedSurface` of `mesh`, analysed on first use and cached per mesh object (a
+    mesh holding numpy arrays, which can change in place, is analysed on every call:
+    `jax.device_put(mesh)` once to have it cached)."""
     if isinstance(mesh, PreparedSurface):
         check_mesh_dtype(mesh.dtype)
         return mesh
     if not isinstance(mesh, SurfaceMesh):
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh, got {type(mesh).__name__}")
-    check_mesh_dtype(mesh.dtype)
     hit = _CACHE.get(id(mesh))
     if hit is not None and hit[0]() is mesh:
+        check_mesh_dtype(mesh.dtype)  # (x64 may have been switched off since)
         return PreparedSurface(mesh, hit[1])
+    mesh.check_arrays()  # a mesh edited after construction (eqx.tree_at skips the constructors' checks)
+    check_mesh_dtype(mesh.dtype)
+    if any(isinstance(x, np.ndarray) for x in jax.tree.leaves(mesh)):
+        # numpy arrays (jax.device_get(mesh), eqx.tree_at with one) can change in place: a
+        # cached analysis would go stale (a pool moved in place had found no start point), so
+        # such a mesh is copied to JAX arrays and analysed on every call, never cached.
+        mesh = jax.tree.map(jnp.asarray, mesh)
+        return PreparedSurface(mesh, _Analysis(mesh))
     return _cached(mesh)
 
 
 def _cached(mesh: SurfaceMesh) -> PreparedSurface:
     """`mesh` analysed and entered in the cache (a `local` mesh too, so that `prepare` of
     it, e.g. by the visibility test, finds the same analysis)."""
-    key, analysis = id(mesh), _Analysis(mesh.check_arrays())
+    key, analysis = id(mesh), _Analysis(mesh)
     _CACHE[key] = (weakref.ref(mesh, lambda _, key=key, cache=_CACHE: cache.pop(key, None)), analysis)
     return PreparedSurface(mesh, analysis)

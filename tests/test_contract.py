@@ -798,14 +798,13 @@ def _edited(mesh, field: str, value):
     (lambda m: _edited(m, "faces", m.faces.astype(jnp.float32)), "mesh.faces must hold integer indices"),
     (lambda m: _edited(m, "vertices", m.vertices[:10]), r"mesh.normals must have shape \(10, 3\)"),
     (lambda m: _edited(m, "normals", m.normals.astype(jnp.float64)), "must share one float dtype"),
-    (lambda m: _edited(m, "vertices", np.array(m.vertices)), "mesh.vertices must be a concrete JAX array"),
+    (lambda m: _edited(m, "vertices", [[0.0, 0.0, 0.0]] * 81), "mesh.vertices must be a concrete array"),
 ])
 def test_a_mesh_edited_after_construction_is_checked_once_before_use(edit, match):
     """`eqx.tree_at` (the way to animate a surface) bypasses the constructors' checks. A NaN
     height had been reported as "P has NaN or Inf", an out-of-range face index as an
-    IndexError inside `features`, and a numpy vertex array changed in place after `prepare`
-    had left its cached analysis stale (NO_CROSSING where a fresh mesh found the path).
-    `prepare` (every solver entry) and `features` check the arrays once per mesh object."""
+    IndexError inside `features`. `prepare` (every solver entry) checks the arrays once per
+    mesh object, `features` on every call."""
     mesh = edit(scenes.wavy_pool(128, dtype="float32").surface)
     P, L = np.array([[0.1, 0.2, -1.0]]), np.array([[0.4, -0.3, 3.0]])
     for call in (lambda: cj.solve(mesh, P, L), lambda: cj.features(mesh), lambda: cj.prepare(mesh),
@@ -813,3 +812,23 @@ def test_a_mesh_edited_after_construction_is_checked_once_before_use(edit, match
                                               receiver=cj.ReceiverGrid(-1.0, -1, 1, -1, 1, 4, 4))):
         with pytest.raises(ValueError, match=match):
             call()
+
+
+def test_a_mesh_of_numpy_arrays_changed_in_place_is_analysed_again():
+    """A numpy vertex array changed in place after a solve had left `prepare`'s cached
+    analysis (bounds, start-point structure) stale: the moved pool found no start point
+    where a fresh mesh with the same vertices found the path. Numpy-array meshes are now
+    analysed on every call, and give what a JAX-array mesh gives."""
+    m = scenes.wavy_pool(128, dtype="float32").surface
+    V = np.array(m.vertices)
+    mesh = eqx.tree_at(lambda q: q.vertices, m, V)
+    P, L = np.array([[3.0, 3.0, -1.0]]), np.array([3.3, 2.7, 3.0])
+    assert not np.asarray(cj.solve(mesh, P, L).found).any()  # the pool spans [-2, 2]: no crossing
+    V[:, :2] += 3.0  # the same mesh object, moved in place (its grid too: prepare warns, bins the faces)
+    with pytest.warns(UserWarning, match="off its regular grid"):
+        moved = cj.solve(mesh, P, L)
+    with pytest.warns(UserWarning, match="off its regular grid"):
+        fresh = cj.solve(eqx.tree_at(lambda q: q.vertices, m, jnp.asarray(V)), P, L)
+    assert np.asarray(fresh.found).all()
+    np.testing.assert_array_equal(np.asarray(moved.status), np.asarray(fresh.status))
+    np.testing.assert_array_equal(np.asarray(moved.point), np.asarray(fresh.point))

@@ -39,6 +39,7 @@ import numpy as np
 
 from .._precision import check_mesh_dtype
 from ..arguments import check_eta, check_fits, check_int, check_real
+from ..features import check as check_features
 from ..lanes import lanes_per_block
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
@@ -91,10 +92,10 @@ def _forward(mesh, face, ab, P, L, eta):
     return st[:, 0] == ObjectiveStatus.OK
 
 
-def _newton_from(prep: PreparedSurface, P, L, eta, start: StartPoint, newton: Newton):
+def _newton_from(prep: PreparedSurface, P, L, eta, start: StartPoint, newton: Newton, features):
     """One Newton solve per lane from `start`; `(found, point, face, ab)` numpy, `found` only
     for forward refraction points."""
-    sol = solve(prep, P, L, eta=eta, method=newton, start=tuple(start))
+    sol = solve(prep, P, L, eta=eta, method=newton, start=tuple(start), features=features)
     face, ab = sol.triangle, sol.barycentric
     found = np.asarray(sol.found) & np.asarray(_forward(prep.mesh, jnp.maximum(face, 0), ab, P, L, eta))
     return found, np.asarray(sol.point, np.float64), np.asarray(face), np.asarray(ab)
@@ -135,13 +136,14 @@ def _check_count(name, value, lo):
 
 def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, intensity,
                receiver_normal, eta: float = 1.333, sigma_t: float = 0.0, same_radius: float = 1e-6,
-               **newton_options) -> EstimatorResult:
+               features="auto", **newton_options) -> EstimatorResult:
     """Biased SMS: `k` Newton solves per receiver from area-uniform random starts, the
     distinct forward solutions summed (Zeltner et al. 2020 §4.3; module docstring).
     `newton_options` go to
-    `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...); anything else
-    (`method`, `start`) is a `ValueError`."""
+    `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...) and `features` to
+    `solve`; anything else (`method`, `start`: the estimator sets them) is a `ValueError`."""
     newton = Newton.from_kwargs(**newton_options)
+    check_features(features)
     k = _check_count("k", k, 1)
     seed = check_int("seed", seed, 0)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
@@ -149,7 +151,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     lane = np.repeat(np.arange(n), k)
     idx = jnp.asarray(lane)
     found, M, face, ab = _newton_from(prep, P[idx], L[idx], eta, surface_starts(prep.mesh, n * k, rng),
-                                      newton)
+                                      newton, features)
     E = np.zeros(n)
     paths = np.zeros(n, np.int64)
     hit = np.nonzero(found)[0]
@@ -172,16 +174,17 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
 
 def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intensity, receiver_normal,
                  eta: float = 1.333, sigma_t: float = 0.0, max_trials: int = 1000, same_radius: float = 1e-6,
-                 **newton_options) -> EstimatorResult:
+                 features="auto", **newton_options) -> EstimatorResult:
     """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
     path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring).
     `newton_options` as `sms_biased`'s."""
     newton = Newton.from_kwargs(**newton_options)
+    check_features(features)
     max_trials = _check_count("max_trials", max_trials, 1)
     seed = check_int("seed", seed, 0)
     prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
-    found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton)
+    found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton, features)
     solves = np.ones(n, np.int64)
     trials = np.where(found, 1, 0).astype(np.int64)
     E_path = np.zeros(n)
@@ -203,7 +206,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
         rep = np.repeat(idx, m)
         g = jnp.asarray(rep)
         f_t, M_t, _, _ = _newton_from(prep, P[g], L[g], eta, surface_starts(prep.mesh, rep.size, rng),
-                                      newton)
+                                      newton, features)
         again = (f_t & (np.linalg.norm(M_t - M[rep], axis=-1) <= same_radius)).reshape(idx.size, m)
         first = np.where(again.any(1), again.argmax(1), m)  # misses before the first recurrence
         capped = first >= allowed

@@ -62,29 +62,22 @@ def _edge_area(e1, e2):
     return norm(jnp.cross(e1, e2)) / 2
 
 
-# A direction within this of unit length (`|v.v - 1|`) is used as given by Alg. 2: a unit
-# vector rounded to float32 (also when cast to float64) is within about 3 eps32 of it.
+# Alg. 2 takes unit normals and light directions: a unit vector rounded to float32 (also when
+# cast to float64) has `|v.v - 1|` of about 3 eps32; a vector farther from unit length is not one.
 _UNIT_SLACK = 16 * float(np.finfo(np.float32).eps)
 
 
-def _light_directions(n00, n10, n01, l_dir, l_dir10, l_dir01):
-    """The normals and light directions of Alg. 2 as unit vectors, and where all six are
-    directions (finite, non-zero).
-
-    Unit input (to `_UNIT_SLACK`) keeps its value exactly: `u + (v - u)` is `v` (the
-    difference is exact), so differences of nearby inputs (`n10 - n00`) keep their digits.
-    Normalising each again moves it by its own rounding, independently of its neighbour's:
-    on float32-rounded inputs that took the float64 ratio's error on 0.1 mm texels from
-    1.5e-9 to 7e-5 (tests/transport/test_photon_differentials.py, the float32 sweep).
-    Other lengths are normalised (`unit_vector`); the derivative is that of `v / |v|`.
-    """
-    out, ok = [], True
-    for v in (n00, n10, n01, l_dir, l_dir10, l_dir01):
-        u, ok_v = unit_vector(v)
-        unit = jnp.abs(dot(v, v) - 1) <= _UNIT_SLACK
-        out.append(u + jax.lax.stop_gradient(jnp.where(unit[..., None], v - u, 0)))
-        ok = ok & ok_v
-    return out, ok
+def _unit_directions(*vectors):
+    """Where every vector (Alg. 2's normals and light directions) is a unit vector to
+    `_UNIT_SLACK`: finite, not zero and not of another length (zero normals had given
+    `sigma = 1` valid). They are used as given, so values and derivatives are the formula's:
+    normalising them here moved float32-rounded inputs by their own rounding, each
+    independently of its neighbour (the float64 ratio's error on 0.1 mm texels went from
+    1.5e-9 to 7e-5), and changed the derivatives along the vectors."""
+    ok = True
+    for v in vectors:
+        ok = ok & (jnp.abs(dot(v, v) - 1) <= _UNIT_SLACK)  # NaN and inf compare False
+    return ok
 
 
 def _scatter_pair(l0, n0, l1, n1, eta, mode):
@@ -142,7 +135,7 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     # Alg. 2 lines 3-6 on the caustic triangle's edges, hit_i - hit_00 = (x_i - x00) +
     # t' (w_i - w00), not on the hits x + t' w: float32 loses eps |x| / texel in the absolute
     # hits (8e-3 relative at 100 m from the origin with 1 mm texels; docs/irradiance.md).
-    (n00, n10, n01, l_dir, l_dir10, l_dir01), ok = _light_directions(n00, n10, n01, l_dir, l_dir10, l_dir01)
+    ok = _unit_directions(n00, n10, n01, l_dir, l_dir10, l_dir01)
     _, dw10, ok10 = _scatter_pair(l_dir, n00, l_dir10, n10, eta, mode)
     _, dw01, ok01 = _scatter_pair(l_dir, n00, l_dir01, n01, eta, mode)
     dx10, dx01 = x10 - x00, x01 - x00
@@ -150,13 +143,13 @@ def _compression_ratio(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir01, t_
     # t' = inf had given sigma 0 valid. Traced scale and level outside their domain: invalid.
     ok = ok & ok10 & ok01 & in_domain(t_hit, lo=0, strict=True)
     ok = ok & in_domain(scale, lo=1) & in_domain(level, lo=0, whole=True)
-    t = jnp.where(ok, t_hit, 0)[..., None]
+    t = t_hit[..., None]
     A = _edge_area(dx10, dx01)
     A_d = _edge_area(dx10 + t * dw10, dx01 + t * dw01)
     ok = ok & (A > 0)
     ratio = safe_div(A_d, A, ok)
     ok = ok & jnp.isfinite(ratio)  # areas overflow beyond arguments.scale_range (float32 1e10 m): invalid
-    sigma = safe_sqrt(jnp.where(ok, ratio, 0)) * jnp.where(ok, scale, 1) ** jnp.where(ok, level, 0)
+    sigma = safe_sqrt(jnp.where(ok, ratio, 0)) * jnp.asarray(scale, A.dtype) ** level  # (invalid: masked below)
     ok = ok & jnp.isfinite(sigma)
     return jnp.where(ok, sigma, 0), ok
 
@@ -172,14 +165,15 @@ def compression_ratio(
 ) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """Kernel scale `sigma = sqrt(A'/A) s^c` by the same-`t'` shortcut (seed 004 eq. 10-11, Alg. 2).
 
-    `x00, x10, x01` surface points of adjacent texels (eq. 10), `n..` their normals
-    (outward, toward the light), `l_dir` the light direction (from the light,
-    `l_dir.n < 0`), both normalised here (`unit_vector`: unit input is used as given),
+    `x00, x10, x01` surface points of adjacent texels (eq. 10), `n..` their unit normals
+    (outward, toward the light), `l_dir` the unit light direction (from the light,
+    `l_dir.n < 0`), used as given (unit to `16 eps` of float32, else the lane is invalid),
     `t_hit` the centre ray's hit distance `t'`, `scale`/`level` the cascade `s >= 1` and
     `c`, a whole number `>= 0` (seed 004 eq. 11; `cascade_intensity_scale`).
     `mode="refract"` (into the medium, index ratio `1/eta`) or `"reflect"` (Alg. 2 as
     printed). Returns `(sigma, valid)`, `valid` False (and `sigma = 0`) for a degenerate
-    surface triangle, a zero or non-finite normal or light direction, light arriving from
+    surface triangle, a normal or light direction that is not a unit vector (zero, not
+    finite, or of another length), light arriving from
     behind a normal (`l_dir.n >= 0`), a ray totally internally reflected (as
     `compression_ratio_exact`), `t_hit` not finite and `> 0`, and (traced; concrete ones
     are a `ValueError`) `eta`, `scale` or `level` outside their domain.
@@ -211,7 +205,7 @@ def _compression_ratio_exact(x00, x10, x01, n00, n10, n01, l_dir, l_dir10, l_dir
     # As _compression_ratio, on the receiver triangle's edges: with y_i = x_i + t_i w_i on
     # the plane, y_i - y00 = (x_i - x00) + t_i (w_i - w00) + (t_i - t00) w00 and
     # t_i - t00 = -((x_i - x00).n + t00 (w_i - w00).n) / (w_i.n).
-    (n00, n10, n01, l_dir, l_dir10, l_dir01), ok = _light_directions(n00, n10, n01, l_dir, l_dir10, l_dir01)
+    ok = _unit_directions(n00, n10, n01, l_dir, l_dir10, l_dir01)
     normal, ok_normal = unit_vector(normal)
     w00, dw10, ok10 = _scatter_pair(l_dir, n00, l_dir10, n10, eta, mode)
     _, dw01, ok01 = _scatter_pair(l_dir, n00, l_dir01, n01, eta, mode)
@@ -244,9 +238,9 @@ def compression_ratio_exact(
     plus the receiver plane `(receiver_point, receiver_normal)` (normalised here, any
     finite length). Returns `(ratio, valid)`; `valid` False where a ray misses the plane
     (parallel or behind), is totally internally reflected, the surface triangle is
-    degenerate, a normal or direction is zero or not finite, light arrives from behind a
-    normal, or (traced) `eta` is not finite and `> 0`. The receiver triangle is formed from
-    differences, as in `compression_ratio`.
+    degenerate, a normal or light direction is not a unit vector or the receiver normal is
+    zero or not finite, light arrives from behind a normal, or (traced) `eta` is not finite
+    and `> 0`. The receiver triangle is formed from differences, as in `compression_ratio`.
     """
     _check_mode(mode)
     l_dir = jnp.asarray(l_dir)

@@ -110,6 +110,7 @@ def test_biased_sms_never_exceeds_the_total_and_reaches_it_with_many_starts():
         # solve: "got multiple values for keyword argument 'method'")
         (sms_biased, dict(k=2, seed=0, method="walk"), r"unknown newton option\(s\) \['method'\]"),
         (sms_unbiased, dict(seed=0, start=None), r"unknown newton option\(s\) \['start'\]"),
+        (sms_biased, dict(k=2, seed=0, features="fast"), "features"),
         # P and L as solve takes them (a (2, 2, 3) P had been flattened to 4 lanes; an L of
         # 3 lanes for 1 P had given JAX's broadcasting error)
         (sms_biased, dict(k=2, seed=0, P=np.zeros((2, 2, 3)) - 1), r"P and L must broadcast to \(N, 3\)"),
@@ -136,3 +137,15 @@ def test_estimators_take_a_receiver_normal_of_any_length():
     assert np.asarray(E[0]).sum() > 0
     np.testing.assert_array_equal(np.asarray(E[1]), np.asarray(E[0]))
     np.testing.assert_array_equal(np.asarray(E[2]), np.asarray(E[0]))
+
+
+def test_estimators_pass_features_to_solve():
+    """`features` goes to `solve` (the general path with None): same estimate on a wavy pool,
+    where compaction skips no lane."""
+    with cj.precision("float64"):
+        sc = scenes.wavy_pool(512, n_receivers=2, dtype="float64")
+        P, L = np.asarray(sc.receivers), np.asarray(sc.lights.endpoint(sc.receivers))
+        a = sms_biased(sc.surface, P, L, k=8, seed=1, intensity=1.0, receiver_normal=UP)
+        b = sms_biased(sc.surface, P, L, k=8, seed=1, intensity=1.0, receiver_normal=UP, features=None)
+    np.testing.assert_array_equal(a.irradiance, b.irradiance)
+    np.testing.assert_array_equal(a.paths, b.paths)
