@@ -180,8 +180,8 @@ def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
         # numpy arrays (jax.device_get(mesh), eqx.tree_at with one) can change in place: a
         # cached analysis would go stale (a pool moved in place had found no start point), so
         # such a mesh is copied to JAX arrays and analysed on every call, never cached.
-        mesh = jax.tree.map(jnp.asarray, mesh)
-        return PreparedSurface(mesh, _Analysis(mesh))
+        copied: SurfaceMesh = jax.tree.map(jnp.asarray, mesh)
+        return PreparedSurface(copied, _Analysis(copied))
     return _cached(mesh)
 
 
