@@ -160,6 +160,44 @@ def test_compression_ratio_refuses_directions_that_are_not_unit_vectors(dtype):
     np.testing.assert_allclose(float(got), float(want), rtol=1e-5)
 
 
+# --------------------------------------------------------------------------- parameters
+REFUSED = {  # kernel call with a concrete parameter outside its domain -> the message
+    "compression_ratio level 0.5": (lambda: cj.compression_ratio(**_alg2(jnp.float64), level=0.5),
+                                    "compression_ratio: level must be finite, whole and >= 0"),
+    "compression_ratio level -3": (lambda: cj.compression_ratio(**_alg2(jnp.float64), level=-3),
+                                   "compression_ratio: level must be finite, whole and >= 0"),
+    "compression_ratio scale 0.5": (lambda: cj.compression_ratio(**_alg2(jnp.float64), scale=0.5),
+                                    "compression_ratio: scale must be finite and >= 1"),
+    "edge_intersections tol 1e6": (lambda: cj.edge_intersections(np.ones(6), tol=1e6),
+                                   r"edge_intersections: tol must be finite and in \[0, 0.01\]"),
+    "edge_intersections tol -1": (lambda: cj.edge_intersections(np.ones(6), tol=-1.0), "tol must be"),
+    "edge_intersections tol nan": (lambda: cj.edge_intersections(np.ones(6), tol=np.nan), "tol must be"),
+    "edge_barycentric edge 7": (lambda: cj.edge_barycentric(np.array([7]), np.array([0.3])),
+                                r"edge_barycentric: edge must be in \[-1, 2\]"),
+    "edge_barycentric edge -2": (lambda: cj.edge_barycentric(-2, 0.3), r"edge must be in \[-1, 2\]"),
+    "cascade_projection level 0.5": (lambda: K.cascade_projection(512, 512, 1.5, 10.0, 2, 0.5),
+                                     "cascade_projection: level must be finite, whole"),
+    "cascade_projection near nan": (lambda: K.cascade_projection(512, 512, np.nan, 10.0, 2, 1),
+                                    "cascade_projection: near must be finite"),
+    "cascade_projection far inf": (lambda: K.cascade_projection(512, 512, 1.5, np.inf, 2, 1),
+                                   "cascade_projection: far must be finite"),
+    "light_position z_near inf": (lambda: K.light_position(np.zeros(3), -_Z, np.inf, 10.0),
+                                  "light_position: z_near must be finite"),
+    "luminance negative weight": (lambda: K.luminance(np.ones(3), (-1.0, 1.0, 1.0)),
+                                  "luminance: weights must be finite and >= 0"),
+    "ray_cone_propagate surface_spread nan": (
+        lambda: K.ray_cone_propagate(np.array(0.0), np.array(1.0), np.array(3.0), np.nan),
+        "ray_cone_propagate: surface_spread must be finite"),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_a_concrete_parameter_outside_its_domain_is_refused_naming_it(case):
+    call, message = REFUSED[case]
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
 def _lane(dtype, name):
     """`value -> (result, valid)` of a kernel with a validity output, `name` traced."""
     c, V, N = _scene(dtype)
