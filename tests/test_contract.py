@@ -714,6 +714,10 @@ def test_zero_lanes_irradiance_start_points_and_photons(pool, feats):
     (lambda: K.schlick_f0(-1.0), "eta"), (lambda: K.schlick_f0(None), "eta"), (lambda: cj.refract(None, _Z, 1.3), "I"),
     (lambda: cj.precision(None).__enter__(), "precision"), (lambda: cj.precision("x").__enter__(), "precision"),
     (lambda: cj.enable_x64("no"), "enabled"), (lambda: cj.enable_x64(0), "enabled"),
+    # solver objects: a ValueError naming the known options (Python's TypeError before)
+    (lambda: cj.Walk(foo=1), r"unknown walk option\(s\) \['foo'\]; known: \['tol'"),
+    (lambda: cj.Newton(solvr="newton"), r"unknown newton option\(s\) \['solvr'\]"),
+    (lambda: cj.Exhaustive(1, 8, 1e-9, 8, 0.0, True, False, 9), "Exhaustive takes at most 7 options"),
     (lambda: cj.cross_edge("mesh", 0, 0, 0.5), "mesh"), (lambda: cj.cross_edge(_MESH, 2**40, 0, 0.5), "face"),
     (lambda: compare.CompareConfig(dtypes=None).validate(), "dtypes"),
     (lambda: cj.start_points(_MESH, 2**40, np.ones(3)), "shape"),

@@ -41,11 +41,27 @@ def default_tol(dtype) -> float:
     return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
 
 
+class _Checked(type):
+    """Metaclass of the solver objects: an unknown or surplus argument is a `ValueError`
+    naming the known options, as `solve(method="walk", foo=1)` says (`Walk(foo=1)` had
+    raised Python's `TypeError` from the dataclass constructor)."""
+
+    def __call__(cls, *args, **kwargs):
+        known = [f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls) else []
+        unknown = sorted(set(kwargs) - set(known))
+        if unknown:
+            raise ValueError(f"unknown {cls.method or cls.__name__} option(s) {unknown}; known: {known}")
+        if len(args) > len(known):
+            raise ValueError(f"{cls.__name__} takes at most {len(known)} options ({known}), got {len(args)} "
+                             "positional arguments")
+        return super().__call__(*args, **kwargs)
+
+
 @dataclasses.dataclass(frozen=True)
-class SolverOptions:
+class SolverOptions(metaclass=_Checked):
     """Base of the solver objects: `method` names it for `solve(method=...)`; the fields in
     `traced` are passed to jit as arrays (a sweep over them compiles once), the rest are
-    static.
+    static. Unknown arguments are a `ValueError` naming the known options.
 
     Subclasses call the `check_*` functions in `__post_init__` (via `_validate`).
     """
