@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .arguments import check_fits
+
 
 def enable_x64(enabled: bool = True) -> None:
     """Turn 64-bit JAX types on (or off) process-wide. Call it once, before any array work.
@@ -249,57 +251,72 @@ _DOMAIN_HINTS = {"eta": " (eta_in / eta_out, water 1.333)", "edge": " (edge k jo
                  "level": " (a cascade level c)"}
 
 
-def _domain_words(lo, hi, strict: bool, whole: bool, integer: bool) -> str:
-    """`finite and > 0`, `finite, whole and >= 0`, `in [0, 2]` (an integer argument is
-    finite and whole)."""
+def _domain_words(lo, hi, strict: bool, whole: bool, integer: bool, hi_strict: bool = False) -> str:
+    """`finite and > 0`, `finite, whole and >= 0`, `in [0, 2]`, `in (0, 1)` (an integer
+    argument is finite and whole)."""
     if lo is not None and hi is not None:
-        bound = [f"in [{lo:g}, {hi:g}]"]
+        bound = [f"in {'(' if strict else '['}{lo:g}, {hi:g}{')' if hi_strict else ']'}"]
     elif lo is not None:
         bound = [f"{'>' if strict else '>='} {lo:g}"]
     else:
-        bound = [f"<= {hi:g}"] if hi is not None else []
+        bound = [f"{'<' if hi_strict else '<='} {hi:g}"] if hi is not None else []
     parts = ([] if integer else ["finite"] + (["whole"] if whole else [])) + bound
     return ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else parts[0]
 
 
 def check_domain(fn_name: str, name: str, value, *, lo=None, hi=None, strict: bool = False,
-                 whole: bool = False, integer: bool = False) -> None:
-    """Refuse a concrete parameter outside its domain with a ValueError naming `fn_name` and
-    `name`: not finite, below `lo` (at `lo` too when `strict`), above `hi`, or (`whole`) not a
-    whole number; a tracer (inside jit) passes unchecked (the kernel uses `in_domain`).
-    `integer`: an integer argument (the message leaves out "finite")."""
+                 hi_strict: bool = False, whole: bool = False, integer: bool = False, dtype=None) -> None:
+    """Refuse a concrete argument outside its domain with a ValueError naming `fn_name` and
+    `name`: not finite, below `lo` (at `lo` too when `strict`), above `hi` (at `hi` too when
+    `hi_strict`), or (`whole`) not a whole number; a tracer (inside jit) passes unchecked
+    (the kernel uses `in_domain`). `integer`: an integer argument (the message leaves out
+    "finite").
+
+    With `dtype`, the float dtype the kernel casts the value to: a finite value must stay
+    finite in it, and a positive one (`lo=0, strict`: a scale, a bandwidth, an index
+    ratio) must be a normal number of it. XLA flushes subnormal numbers to zero, so
+    `1 / eps` would be inf and `t / t_max` NaN for a value that passed a plain `> 0`
+    test (float32 `t_max = 1e-45`); inside jit such a lane fails `in_domain` the same way.
+    """
     if isinstance(value, jax.core.Tracer):
         return
     v = np.asarray(value)
     if v.size == 0:
         return
-    bad = ~in_domain(v.astype(np.float64), lo=lo, hi=hi, strict=strict, whole=whole, xp=np)
+    v64 = v.astype(np.float64)
+    bad = ~in_domain(v64, lo=lo, hi=hi, strict=strict, hi_strict=hi_strict, whole=whole, xp=np)
     if np.any(bad):
         shown = v[bad].reshape(-1)[:3].tolist()
-        words = _domain_words(lo, hi, strict, whole, integer)
+        words = _domain_words(lo, hi, strict, whole, integer, hi_strict)
         raise ValueError(f"{fn_name}: {name} must be {words}, got {shown}{_DOMAIN_HINTS.get(name, '')}")
+    if dtype is not None and jnp.issubdtype(dtype, jnp.floating):
+        check_fits(f"{fn_name}: {name}", v64, jnp.dtype(dtype), positive=lo == 0 and strict,
+                   whose="the kernel's dtype")
 
 
-def in_domain(x, *, lo=None, hi=None, strict: bool = False, whole: bool = False, xp=jnp):
-    """Where `x` lies in the domain of `check_domain` (finite, `>= lo` or `> lo`, `<= hi`, whole):
-    the mask a kernel with a validity output applies to a traced parameter."""
+def in_domain(x, *, lo=None, hi=None, strict: bool = False, hi_strict: bool = False, whole: bool = False,
+              xp=jnp):
+    """Where `x` lies in the domain of `check_domain` (finite, `>= lo` or `> lo`, `<= hi` or
+    `< hi`, whole): the mask a kernel with a validity output applies to a traced parameter."""
     ok = xp.isfinite(x)
     if lo is not None:
         ok = ok & ((x > lo) if strict else (x >= lo))
     if hi is not None:
-        ok = ok & (x <= hi)
+        ok = ok & ((x < hi) if hi_strict else (x <= hi))
     if whole:
         ok = ok & (xp.floor(x) == x)
     return ok
 
 
-def _domains(positive, nonnegative, whole, bounds) -> dict:
+def _domains(positive, nonnegative, whole, bounds, below) -> dict:
     """`name -> check_domain keywords` from `float_inputs`' declarations."""
     spec: dict[str, dict] = {n: {"lo": 0, "strict": True} for n in positive}
     for n in nonnegative:
         spec.setdefault(n, {})["lo"] = 0
     for n, (lo, hi) in bounds.items():
         spec.setdefault(n, {}).update(lo=lo, hi=hi)
+    for n, hi in below.items():
+        spec.setdefault(n, {}).update(hi=hi, hi_strict=True)
     for n in whole:
         spec.setdefault(n, {})["whole"] = True
     return spec
@@ -308,7 +325,8 @@ def _domains(positive, nonnegative, whole, bounds) -> dict:
 def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ...] = (),
                  dtype_arg: str | None = None, positive: tuple[str, ...] = (),
                  nonnegative: tuple[str, ...] = (), whole: tuple[str, ...] = (),
-                 bounds: dict[str, tuple[float | None, float | None]] | None = None):
+                 bounds: dict[str, tuple[float | None, float | None]] | None = None,
+                 below: dict[str, float] | None = None):
     """Decorator: the input contract of a public kernel, applied at its entry.
 
     `arrays` name the float data arguments (they set the dtype), `params` the float
@@ -319,16 +337,17 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
     params with a physical domain (an index ratio `eta > 0`, an extinction `sigma_t >= 0`),
     `whole` params that count (a cascade level), `bounds` maps a param or an integer
     argument to its closed range `(lo, hi)` (an edge in `[0, 2]`; `None`: unbounded on
-    that side, `(None, None)`: finite only); `positive`, `nonnegative` and `whole` may name
-    integer arguments too. Concrete values outside, or not finite, are refused
-    (`check_domain`).
+    that side, `(None, None)`: finite only), `below` to an open upper bound (an angle
+    `< pi`, `gamma < 1`). Domains may name arrays, params and integer arguments. Concrete
+    values outside, not finite, overflowing the result dtype or (`positive`) subnormal in
+    it are refused (`check_domain`).
     Integer arguments must fit the dtype JAX gives them (`as_integer_array`; uint32 where
     annotated `UInt32`). Violations raise `ValueError` naming the function and argument;
     `None` arguments are left alone. Works on concrete arrays and on tracers (inside jit it
     only casts: a kernel with a validity output marks such lanes invalid itself with
     `in_domain`, the others document what they do, docs/input_contract.md).
     """
-    domains = _domains(positive, nonnegative, whole, bounds or {})
+    domains = _domains(positive, nonnegative, whole, bounds or {}, below or {})
 
     def decorate(fn):
         sig = inspect.signature(fn)
@@ -341,8 +360,8 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
             if n not in sig.parameters:
                 raise TypeError(f"float_inputs: {fn.__qualname__} has no argument {n!r}")
         for n in domains:
-            if n not in params and n not in ints:
-                raise TypeError(f"float_inputs: {fn.__qualname__}: {n!r} has a domain but is not a param or int")
+            if n not in (*arrays, *params, *ints):
+                raise TypeError(f"float_inputs: {fn.__qualname__}: {n!r} has a domain but is not an argument")
         unsigned = {n for n in ints if n in hints and _unsigned(hints[n].annotation)}
         fn_name = fn.__name__
 
@@ -367,8 +386,8 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
                     continue
                 if n in params:
                     real_input_dtype(f"{fn_name}: {n}", a[n])
-                    if n in domains:
-                        check_domain(fn_name, n, a[n], **domains[n])
+                if n in domains:
+                    check_domain(fn_name, n, a[n], dtype=dtype, **domains[n])
                 a[n] = jnp.asarray(a[n], dtype)
                 if dims.get(n):
                     batch = _check_shape(fn_name, n, a[n].shape, dims[n])
@@ -401,7 +420,7 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
 
         wrapper.input_contract = {"arrays": arrays, "params": params, "ints": ints,
                                   "dtype_arg": dtype_arg, "positive": positive, "nonnegative": nonnegative,
-                                  "whole": whole, "bounds": dict(bounds or {})}
+                                  "whole": whole, "bounds": dict(bounds or {}), "below": dict(below or {})}
         return wrapper
 
     return decorate

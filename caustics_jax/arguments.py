@@ -138,16 +138,32 @@ def check_points(name: str, value, dtype) -> np.ndarray:
     return X
 
 
-def check_fits(name: str, value, dtype):
+def check_fits(name: str, value, dtype, *, positive: bool = False, whose: str = "the mesh's dtype"):
     """`value` (real numbers already checked finite in float64) stays finite when cast to
     `dtype`, the computation's dtype: a float32 mesh refuses `eta=1e39` as it refuses
-    coordinates that overflow (`check_points`). Returns `value` unchanged."""
-    with np.errstate(over="ignore"):
-        cast = np.asarray(value, np.float64).astype(dtype)
-    if not np.all(np.isfinite(cast)):
-        raise ValueError(f"{name} overflows {np.dtype(dtype).name}, the mesh's dtype (largest "
-                         f"{float(np.finfo(dtype).max):.4g}), got {value!r}")
+    coordinates that overflow (`check_points`). `positive`: a value known to be `> 0`
+    (an index ratio, a scale something is divided by) must also be a normal number of
+    `dtype`, since XLA flushes smaller ones to zero (float32 `eta = 1e-40`). Returns
+    `value` unchanged."""
+    v = np.asarray(value, np.float64)
+    with np.errstate(over="ignore", under="ignore"):
+        cast = v.astype(dtype)
+    info = np.finfo(dtype)
+    bad = ~np.isfinite(cast)
+    if np.any(bad):
+        raise ValueError(f"{name} overflows {np.dtype(dtype).name}, {whose} (largest "
+                         f"{float(info.max):.4g}), got {_shown(value, v, bad)}")
+    bad = np.abs(cast) < info.tiny
+    if positive and np.any(bad):
+        raise ValueError(f"{name} must be at least {float(info.tiny):.4g}, the smallest normal "
+                         f"{np.dtype(dtype).name} ({whose}; XLA flushes smaller numbers to zero), "
+                         f"got {_shown(value, v, bad)}")
     return value
+
+
+def _shown(value, v: np.ndarray, bad: np.ndarray):
+    """`value` itself when it is a Python number, else its first three entries where `bad`."""
+    return repr(value) if isinstance(value, numbers.Real) else v[bad].reshape(-1)[:3].tolist()
 
 
 def check_tol_resolves(name: str, tol, dtype) -> None:

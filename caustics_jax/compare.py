@@ -196,7 +196,7 @@ class CompareConfig:
         if bad:
             raise ValueError(f"dtypes must be float32 and/or float64, got {bad}")
         for dtype in self.dtypes:  # as solve refuses it, before the run
-            check_fits("eta", self.eta, np.dtype(dtype))
+            check_fits("eta", self.eta, np.dtype(dtype), positive=True)
 
     def expected_solves(self) -> int:
         """Solver lanes the run will compute: `n` per configuration and dtype, timed

@@ -82,6 +82,7 @@ def _one_line_error(capsys, *needles):
 @pytest.mark.parametrize("argv, needle", [
     (["--eta", "-1"], "eta must be one finite positive"), (["--eta", "nan"], "eta must be one finite positive"),
     (["--eta", "inf"], "eta"), (["--eta", "1e39"], "eta overflows float32"),
+    (["--eta", "1e-40"], "eta must be at least"),
     (["--n", "0"], "n must be an integer"), (["--n", str(2**40)], "n must be an integer"),
     (["--triangles", "-5"], "n_triangles"), (["--repeats", "0"], "repeats"), (["--seed", "-1"], "seed"),
     (["--ref-n", "-1"], "ref_n"), (["--sweep-n", "0"], "sweep_n"), (["--scene", "missing.obj"], "does not exist"),

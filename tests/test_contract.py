@@ -448,14 +448,16 @@ def test_a_bad_irradiance_argument_is_a_value_error_naming_it(pool, no_jit_work,
 
 @pytest.mark.parametrize("kwargs, match", [
     (dict(eta=1e39), "eta overflows float32"), (dict(intensity=1e39), "intensity overflows float32"),
+    (dict(eta=1e-40), "eta must be at least 1.175e-38, the smallest normal float32"),
     (dict(sigma_t=1e39), "sigma_t overflows float32"), (dict(tol=1e-30), "below float32's resolution"),
     (dict(tol=1e-8), "below float32's resolution"), (dict(method="trace"), "returns every path"),
     (dict(method=cj.Trace()), "returns every path"), (dict(method="exhaustive", return_all=True), "returns every path"),
 ])
 def test_values_the_mesh_dtype_cannot_hold_or_resolve_are_refused(pool, no_jit_work, kwargs, match):
     """Scalars are checked against the dtype they are cast to (float32 `eta=1e39` had run
-    as inf and ended every lane LEFT_MESH), a `tol` below the dtype's epsilon can certify no
-    point, and `irradiance` refuses a solver returning every path without `all_paths`."""
+    as inf and ended every lane LEFT_MESH, `eta=1e-40` as 0, flushed by XLA), a `tol` below
+    the dtype's epsilon can certify no point, and `irradiance` refuses a solver returning
+    every path without `all_paths`."""
     mesh, P, L = pool
     irr = dict(intensity=1.0, receiver_normal=[0, 0, 1]) | kwargs
     with pytest.raises(ValueError, match=match):
@@ -592,6 +594,7 @@ def test_photon_irradiance_takes_a_prepared_surface_as_solve_does(pool):
     (dict(receiver=None), "receiver"), (dict(L=np.array([0, 0, -5.0])), "L"), (dict(L=np.zeros(2)), "L"),
     (dict(L=np.array([0, np.nan, 3])), "L"), (dict(L="x"), "L"), (dict(L=np.ones(3, bool)), "L"),
     (dict(progress=1), "progress"), (dict(eta=1e39), "eta overflows float32"),
+    (dict(eta=1e-40), "eta must be at least"),
     (dict(intensity=1e39), "intensity overflows float32"), (dict(sigma_t=1e39), "sigma_t overflows float32"),
 ])
 def test_a_bad_photon_irradiance_argument_is_a_value_error_naming_it(pool, kwargs, match):

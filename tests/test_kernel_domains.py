@@ -264,3 +264,60 @@ def test_inside_jit_a_negative_or_fractional_level_has_no_scale():
     P = jax.jit(lambda c: K.cascade_projection(512, 512, 1.5, 10.0, 2.0, c))
     assert float(P(0.5)[0, 0]) == 0.0 and float(P(-1.0)[1, 1]) == 0.0
     np.testing.assert_allclose(float(P(1.0)[0, 0]), 2 / 1024)
+
+
+# --------------------------------------------------------------------------- one domain check
+# Every declared domain, on arrays and parameters alike, goes through `_precision.check_domain`
+# (the kernels' own range checks, which named no kernel, are gone). In the kernel's dtype a
+# declared value must fit, and a positive one must be a normal number: float32 `refract` had
+# run with eta = 1e-40 (flushed to zero by XLA) and eta = 1e39 (inf, T = 0) without a word.
+_ONE = np.array(1.0)
+DECLARED = {
+    "bilateral_weight delta": (lambda: K.bilateral_weight(_ONE, _ONE, np.zeros(3), np.ones(3), -_ONE, 0.1),
+                               "bilateral_weight: delta must be finite and > 0"),
+    "ray_cone_radius width": (lambda: K.ray_cone_radius(-_ONE), "ray_cone_radius: width must be finite and >= 0"),
+    "pixel_spread_angle fov_y": (lambda: K.pixel_spread_angle(np.array(np.pi), 1080),
+                                 r"pixel_spread_angle: fov_y must be finite and in \(0, 3.14159\)"),
+    "ray_cone_propagate spread": (lambda: K.ray_cone_propagate(_ONE, np.array(4.0), _ONE),
+                                  r"ray_cone_propagate: spread must be finite and in \[0, 3.14159\)"),
+    "intensity_attenuation gamma": (lambda: K.intensity_attenuation(_ONE, 10.0, 1.0),
+                                    r"intensity_attenuation: gamma must be finite and in \(0, 1\)"),
+    "temporal_ema alpha": (lambda: K.temporal_ema(np.ones(3), np.ones(3), 2.0),
+                           r"temporal_ema: alpha must be finite and in \[0, 1\]"),
+    "fixed_point_encode x": (lambda: K.fixed_point_encode(np.array([-1.0])), "fixed_point_encode: x must be"),
+    "fixed_point_accumulate segment_ids": (lambda: K.fixed_point_accumulate(np.array([1.0]), np.array([5]), 2),
+                                           r"fixed_point_accumulate: segment_ids must be in \[0, 1\]"),
+    "sprite_size sigma": (lambda: K.sprite_size(4.0, 4.0, 256, 256, 1.0, -_ONE), "sprite_size: sigma must be"),
+    "cascade_projection width": (lambda: K.cascade_projection(0, 512, 1.5, 10.0, 2, 1),
+                                 "cascade_projection: width must be finite and > 0"),
+    "cascade_intensity_scale s": (lambda: K.cascade_intensity_scale(1, 0.5),
+                                  "cascade_intensity_scale: s must be finite and >= 1"),
+    "fresnel_reflect_approx f_frac": (lambda: K.fresnel_reflect_approx(-_Z, _Z, 2.0),
+                                      r"fresnel_reflect_approx: f_frac must be finite and in \[0, 1\]"),
+    "refract eta subnormal": (lambda: cj.refract(-_Z.astype(np.float32), _Z.astype(np.float32), 1e-40),
+                              "refract: eta must be at least 1.175e-38, the smallest normal float32"),
+    "refract eta overflow": (lambda: cj.refract(-_Z.astype(np.float32), _Z.astype(np.float32), 1e39),
+                             r"refract: eta overflows float32, the kernel.s dtype"),
+    "bilateral_weight eps subnormal": (
+        lambda: K.bilateral_weight(*(np.asarray(x, np.float32) for x in (1.0, 1.0, np.zeros(3), np.ones(3), 1.0)),
+                                   1e-40),
+        "bilateral_weight: eps must be at least 1.175e-38, the smallest normal float32"),
+    "compression_ratio eta subnormal": (lambda: cj.compression_ratio(**_alg2(jnp.float32), eta=1e-40),
+                                        "compression_ratio: eta must be at least 1.175e-38"),
+}
+
+
+@pytest.mark.parametrize("case", list(DECLARED))
+def test_a_declared_domain_is_checked_once_naming_the_kernel(case):
+    call, message = DECLARED[case]
+    with cj.precision("float32"), pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_a_positive_parameter_normal_in_float64_is_accepted_there():
+    """1e-40 is subnormal in float32 only: float64 `refract` takes it, float32 refuses it."""
+    with cj.precision("float64"):
+        T = cj.refract(-_Z, _Z, 1e-40)
+    np.testing.assert_allclose(np.asarray(T), -_Z)
+    with cj.precision("float32"), pytest.raises(ValueError, match="smallest normal float32"):
+        cj.refract(-_Z.astype(np.float32), _Z.astype(np.float32), 1e-40)

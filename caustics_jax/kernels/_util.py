@@ -26,30 +26,6 @@ def concrete(x):
     return np.asarray(x)
 
 
-def check(x, name: str, *, lower=None, upper=None, strict=False, upper_open=False, finite=True) -> None:
-    """Raise ValueError naming `name` when a concrete `x` is out of range or not finite.
-
-    `strict` with `lower=0` (a positive scale: a radius, bandwidth, epsilon) also refuses
-    subnormal numbers: XLA flushes them to zero, so `1 / eps` would be inf and `t / t_max`
-    NaN for a value that passed a plain `> 0` test (float32 `t_max = 1e-45`).
-    """
-    a = concrete(x)
-    if a is None or a.size == 0:
-        return
-    if finite and not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite")
-    if lower is not None:
-        if strict and lower == 0 and np.issubdtype(a.dtype, np.floating):
-            tiny = np.finfo(a.dtype).tiny
-            if np.any(a < tiny):
-                raise ValueError(f"{name} must be > 0 and at least {tiny:.4g} (the smallest normal "
-                                 f"{a.dtype.name}; smaller numbers are flushed to zero), got min {a.min()}")
-        elif np.any(a <= lower) if strict else np.any(a < lower):
-            raise ValueError(f"{name} must be {'>' if strict else '>='} {lower}, got min {a.min()}")
-    if upper is not None and (np.any(a >= upper) if upper_open else np.any(a > upper)):
-        raise ValueError(f"{name} must be {'<' if upper_open else '<='} {upper}, got max {a.max()}")
-
-
 def check_last_axis(x, name: str, size: int) -> None:
     shape = np.shape(x)
     if len(shape) == 0 or shape[-1] != size:

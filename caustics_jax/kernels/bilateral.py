@@ -19,7 +19,7 @@ from jaxtyping import Array, Float, Int
 
 from .._precision import float_inputs
 from ..geometry import dot
-from ._util import as_float, check, check_last_axis, float_dtype, ratio_scale, static_int, tiny
+from ._util import as_float, check_last_axis, float_dtype, ratio_scale, static_int, tiny
 
 #: Eq. 25's constant (default). Alg. 4 line 7 prints 0.144 instead.
 C_SCENE_FACTOR = 0.114
@@ -31,7 +31,7 @@ REC709 = (0.2126, 0.7152, 0.0722)
 _MAX_RADIUS = 15
 
 
-@float_inputs("z_p", "z_q", "pos_p", "pos_q", "delta", params=("eps",))
+@float_inputs("z_p", "z_q", "pos_p", "pos_q", "delta", params=("eps",), positive=("delta", "eps"))
 def bilateral_weight(
     z_p: Float[Array, "*batch"],
     z_q: Float[Array, "*batch"],
@@ -53,8 +53,6 @@ def bilateral_weight(
     `eps` is floored at the dtype's smallest normal number.
     """
     check_last_axis(pos_p, "pos_p", 3)
-    check(delta, "delta", lower=0, strict=True)
-    check(eps, "eps", lower=0, strict=True)
     dtype = float_dtype(z_p, z_q, pos_p, pos_q, delta)
     z_p, z_q, delta = (jnp.asarray(a, dtype) for a in (z_p, z_q, delta))
     d = jnp.asarray(pos_p, dtype) - jnp.asarray(pos_q, dtype)
@@ -76,7 +74,8 @@ def luminance(rgb: Float[Array, "*batch 3"], weights=REC709) -> Float[Array, "*b
     return jnp.sum(rgb.astype(dtype) * jnp.asarray(weights, dtype), axis=-1)
 
 
-@float_inputs("lum_c", params=("lum_l_min", "c_scene_factor"))
+@float_inputs("lum_c", params=("lum_l_min", "c_scene_factor"), nonnegative=("lum_l_min",),
+              positive=("c_scene_factor",))
 def adaptive_kernel_params(
     lum_c: Float[Array, "*batch"], lum_l_min, c_scene_factor=C_SCENE_FACTOR
 ) -> tuple[Int[Array, "*batch"], Int[Array, "*batch"], Float[Array, "*batch"]]:
@@ -86,8 +85,6 @@ def adaptive_kernel_params(
     `lum(C(p)) < 0.1 C_scene` gives `(15, 5, 15)`, `< 0.5 C_scene` gives `(10, 1, 2)`,
     otherwise `(5, 1, 1)`.
     """
-    check(lum_l_min, "lum_l_min", lower=0)
-    check(c_scene_factor, "c_scene_factor", lower=0, strict=True)
     lum_c = jnp.asarray(lum_c)
     dtype = float_dtype(lum_c)
     c_scene = as_float(c_scene_factor, dtype) * as_float(lum_l_min, dtype)
@@ -109,7 +106,8 @@ def _neighbours(a, offsets, axis: int):
     return jnp.moveaxis(shifted, axis, 0), valid
 
 
-@float_inputs("C", "depth", "pos", params=("lum_l_min", "c_scene_factor", "eps"))
+@float_inputs("C", "depth", "pos", params=("lum_l_min", "c_scene_factor", "eps"), nonnegative=("lum_l_min",),
+              positive=("c_scene_factor", "eps"))
 def denoise_subpass(
     C: Float[Array, "H W 3"],
     depth: Float[Array, "H W"],
@@ -161,7 +159,8 @@ def denoise_subpass(
     return total / weight[..., None]
 
 
-@float_inputs("C", "depth", "pos", params=("lum_l_min", "c_scene_factor", "eps"))
+@float_inputs("C", "depth", "pos", params=("lum_l_min", "c_scene_factor", "eps"), nonnegative=("lum_l_min",),
+              positive=("c_scene_factor", "eps"))
 def bilateral_denoise(
     C: Float[Array, "H W 3"],
     depth: Float[Array, "H W"],

@@ -20,7 +20,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._precision import float_inputs, in_domain
-from ._util import as_float, check, check_last_axis, concrete, float_dtype, safe_div, static_int, static_real
+from ._util import as_float, check_last_axis, concrete, float_dtype, safe_div, static_int, static_real
 
 #: Largest thread id of a dispatch: the GLSL port's `int tid` (and Alg. 1's arithmetic) is 32-bit.
 MAX_THREADS = 2**31 - 1
@@ -44,7 +44,8 @@ def light_position(
 
 
 @float_inputs(params=("width", "height", "near", "far", "s", "level"), dtype_arg="dtype", nonnegative=("level",),
-              whole=("level",), bounds={"near": (None, None), "far": (None, None)})
+              whole=("level",), positive=("width", "height"),
+              bounds={"near": (None, None), "far": (None, None), "s": (1, None)})
 def cascade_projection(
     width, height, near, far, s, level, dtype=jnp.float32
 ) -> Float[Array, "4 4"]:
@@ -61,12 +62,10 @@ def cascade_projection(
     planes and an extent `max(w, h) s^level` beyond the dtype are refused; inside jit
     (unchecked) such entries are 0, never inf.
     """
-    check(width, "width", lower=0, strict=True)
-    check(height, "height", lower=0, strict=True)
-    check(s, "s", lower=1)
     n, f = concrete(near), concrete(far)
     if n is not None and f is not None and np.any(f <= n):
-        raise ValueError(f"far must exceed near (in {jnp.dtype(dtype).name}), got near={n}, far={f}")
+        raise ValueError(f"cascade_projection: far must exceed near (in {jnp.dtype(dtype).name}), "
+                         f"got near={n}, far={f}")
     w, h = concrete(width), concrete(height)
     if w is not None and h is not None:
         _check_power_fits("cascade_projection", "the extent max(width, height) s^level",
@@ -148,7 +147,7 @@ def cascade_thread_counts(ccm0_x: int, ccm0_y: int, s: int, n_levels: int) -> tu
     return (ccm0_x * ccm0_y,) + (ring,) * (n_levels - 1)
 
 
-@float_inputs(params=("s",), ints=("level",), dtype_arg="dtype", nonnegative=("level",))
+@float_inputs(params=("s",), ints=("level",), dtype_arg="dtype", nonnegative=("level",), bounds={"s": (1, None)})
 def cascade_intensity_scale(
     level: Int[Array, "*batch"], s, dtype=jnp.float32
 ) -> Float[Array, "*batch"]:
@@ -161,7 +160,6 @@ def cascade_intensity_scale(
     A negative level, or one whose scale overflows `dtype` (float32, s = 2: above 63), is
     refused outside jit; inside jit (unchecked) its scale is 0, like a masked lane.
     """
-    check(s, "s", lower=1)
     _check_power_fits("cascade_intensity_scale", "s^(2 level)", 1.0, s, level, 2, dtype)
     s, c = as_float(s, dtype), jnp.asarray(level).astype(dtype)
     fits = jnp.isfinite(s ** (2 * c)) & (c >= 0)  # a negative level had scaled by s^-2c

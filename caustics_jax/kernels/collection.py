@@ -14,7 +14,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._precision import float_inputs
 from ..geometry import dot, safe_normalize, safe_sqrt
-from ._util import as_float, check, check_last_axis, float_dtype, ratio_scale, safe_div, tan_half
+from ._util import as_float, check_last_axis, float_dtype, ratio_scale, safe_div, tan_half
 
 #: Search radius cap of seed 000 §3.2 (5 mm, scene units in metres).
 RADIUS_CAP = 5e-3
@@ -30,7 +30,7 @@ EMA_ALPHA = 0.8
 _MIN_COS = 1e-6
 
 
-@float_inputs("fov_y", params=("height_px",))
+@float_inputs("fov_y", params=("height_px",), positive=("fov_y", "height_px"), below={"fov_y": np.pi})
 def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array, "*batch"]:
     """Spread angle of a primary ray cone (Akenine-Möller et al. 2021 §2, RTG1 ch. 20 eq. 30).
 
@@ -38,8 +38,6 @@ def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array,
     `fov_y` (radians) over `H` pixels subtends at the eye. `fov_y` lies in `(0, pi)`; inside
     jit (unchecked) a wider one is clipped below `pi`, where `alpha` tends to `pi / 2`.
     """
-    check(fov_y, "fov_y", lower=0, strict=True, upper=np.pi, upper_open=True)
-    check(height_px, "height_px", lower=0, strict=True)
     fov_y = jnp.asarray(fov_y)
     dtype = float_dtype(fov_y)
     fov_y = fov_y.astype(dtype)
@@ -47,7 +45,8 @@ def pixel_spread_angle(fov_y: Float[Array, "*batch"], height_px) -> Float[Array,
 
 
 @float_inputs("width", "spread", "t", params=("surface_spread", "roughness_spread"),
-              bounds={"surface_spread": (None, None)})
+              bounds={"surface_spread": (None, None)}, nonnegative=("width", "spread", "t", "roughness_spread"),
+              below={"spread": np.pi})
 def ray_cone_propagate(
     width: Float[Array, "*batch"],
     spread: Float[Array, "*batch"],
@@ -67,10 +66,6 @@ def ray_cone_propagate(
     would turn negative); inside jit (unchecked) it is clipped below `pi`. `surface_spread`
     may be negative (a concave surface narrows the cone) but must be finite.
     """
-    check(width, "width", lower=0)
-    check(spread, "spread", lower=0, upper=np.pi, upper_open=True)
-    check(t, "t", lower=0)
-    check(roughness_spread, "roughness_spread", lower=0)
     dtype = float_dtype(width, spread, t)
     width, spread, t = (jnp.asarray(a, dtype) for a in (width, spread, t))
     new_width = width + 2 * t * tan_half(spread)
@@ -78,17 +73,16 @@ def ray_cone_propagate(
     return new_width, new_spread
 
 
-@float_inputs("width", params=("cap",))
+@float_inputs("width", params=("cap",), nonnegative=("width",), positive=("cap",))
 def ray_cone_radius(width: Float[Array, "*batch"], cap=RADIUS_CAP) -> Float[Array, "*batch"]:
     """Collection radius at a secondary hit: half the ray-cone width, capped (seed 000 §3)."""
-    check(width, "width", lower=0)
-    check(cap, "cap", lower=0, strict=True)
     width = jnp.asarray(width)
     dtype = float_dtype(width)
     return jnp.minimum(width.astype(dtype) / 2, as_float(cap, dtype))
 
 
-@float_inputs("t", "spread", "cos_theta", params=("cap",))
+@float_inputs("t", "spread", "cos_theta", params=("cap",), nonnegative=("t", "spread"), positive=("cap",),
+              below={"spread": np.pi})
 def pixel_footprint_radius(
     t: Float[Array, "*batch"],
     spread: Float[Array, "*batch"],
@@ -103,9 +97,6 @@ def pixel_footprint_radius(
     half-diagonal `(s / 2) sqrt(1 + 1 / cos^2 theta)`, then capped at `cap` (5 mm).
     `spread` lies in `[0, pi)`, clipped below `pi` inside jit (as `ray_cone_propagate`).
     """
-    check(t, "t", lower=0)
-    check(spread, "spread", lower=0, upper=np.pi, upper_open=True)
-    check(cap, "cap", lower=0, strict=True)
     dtype = float_dtype(t, spread, cos_theta)
     t, spread, cos_theta = (jnp.asarray(a, dtype) for a in (t, spread, cos_theta))
     c = jnp.maximum(jnp.abs(cos_theta), as_float(_MIN_COS, dtype))
@@ -114,7 +105,7 @@ def pixel_footprint_radius(
     return jnp.minimum(r, as_float(cap, dtype))
 
 
-@float_inputs("center", "normal", "radius")
+@float_inputs("center", "normal", "radius", nonnegative=("radius",))
 def cylinder_aabb(
     center: Float[Array, "*batch 3"],
     normal: Float[Array, "*batch 3"],
@@ -128,7 +119,6 @@ def cylinder_aabb(
     """
     check_last_axis(center, "center", 3)
     check_last_axis(normal, "normal", 3)
-    check(radius, "radius", lower=0)
     dtype = float_dtype(center, normal, radius)
     center = jnp.asarray(center, dtype)
     n = safe_normalize(jnp.asarray(normal, dtype))
@@ -138,7 +128,7 @@ def cylinder_aabb(
     return center - half, center + half
 
 
-@float_inputs("point", "center", "normal", "radius")
+@float_inputs("point", "center", "normal", "radius", nonnegative=("radius",))
 def in_cylinder(
     point: Float[Array, "*batch 3"],
     center: Float[Array, "*batch 3"],
@@ -151,7 +141,6 @@ def in_cylinder(
     squares that leave the dtype (a float32 radius of 1e20) cannot decide the test.
     """
     check_last_axis(point, "point", 3)
-    check(radius, "radius", lower=0)
     dtype = float_dtype(point, center, normal, radius)
     d = jnp.asarray(point, dtype) - jnp.asarray(center, dtype)
     n = safe_normalize(jnp.asarray(normal, dtype))
@@ -163,7 +152,7 @@ def in_cylinder(
     return (jnp.abs(axial) <= r * as_float(HEIGHT_FRACTION / 2, dtype)) & (radial2 <= r * r)
 
 
-@float_inputs("p_prev", "n_prev", "p", "n", "r", ints=("m_prev", "m"))
+@float_inputs("p_prev", "n_prev", "p", "n", "r", ints=("m_prev", "m"), nonnegative=("r",))
 def reuse_accepted(
     p_prev: Float[Array, "*batch 3"],
     n_prev: Float[Array, "*batch 3"],
@@ -181,7 +170,6 @@ def reuse_accepted(
     """
     check_last_axis(p, "p", 3)
     check_last_axis(p_prev, "p_prev", 3)
-    check(r, "r", lower=0)
     dtype = float_dtype(p_prev, n_prev, p, n, r)
     d = jnp.asarray(p_prev, dtype) - jnp.asarray(p, dtype)
     r = jnp.asarray(r, dtype)
@@ -194,7 +182,7 @@ def reuse_accepted(
     return close & aligned & (jnp.asarray(m_prev) == jnp.asarray(m))
 
 
-@float_inputs("p_prev", "p", "r")
+@float_inputs("p_prev", "p", "r", nonnegative=("r",))
 def reuse_weight(
     p_prev: Float[Array, "*batch 3"], p: Float[Array, "*batch 3"], r: Float[Array, "*batch"]
 ) -> Float[Array, "*batch"]:
@@ -209,7 +197,6 @@ def reuse_weight(
     the division stays well conditioned and the gradient finite.
     """
     check_last_axis(p, "p", 3)
-    check(r, "r", lower=0)
     dtype = float_dtype(p_prev, p, r)
     d = jnp.asarray(p_prev, dtype) - jnp.asarray(p, dtype)
     sigma = as_float(SIGMA_FRACTION, dtype) * jnp.asarray(r, dtype)
@@ -224,28 +211,26 @@ def reuse_weight(
     return jnp.where(far, 0, jnp.exp(-d2 / jnp.where(ok, two_sigma2, 1))).astype(dtype)
 
 
-@float_inputs("tau", "intensity", "r")
+@float_inputs("tau", "intensity", "r", nonnegative=("r",))
 def resolve(tau, intensity, r: Float[Array, "*batch"]):
     """Resolve accumulated intensity to radiance (seed 000 eq. 1): `L_o = tau I / (pi r^2)`.
 
     `tau` and `intensity` broadcast against `r` (add a trailing axis to `r` for RGB). A
     point with `r = 0` gathered nothing and resolves to 0.
     """
-    check(r, "r", lower=0)
     dtype = float_dtype(tau, intensity, r)
     r = jnp.asarray(r, dtype)
     area = as_float(jnp.pi, dtype) * r * r
     return safe_div(jnp.asarray(tau, dtype) * jnp.asarray(intensity, dtype), area)
 
 
-@float_inputs("L_hat", "L", params=("alpha",))
+@float_inputs("L_hat", "L", params=("alpha",), bounds={"alpha": (0, 1)})
 def temporal_ema(L_hat, L, alpha=EMA_ALPHA):
     """Temporal exponential moving average (seed 000 eq. 2): `alpha L_hat + (1 - alpha) L`.
 
     `L_hat` is the radiance gathered from the previous frame, `L` this frame's resolve;
     the paper uses `alpha = 0.8`.
     """
-    check(alpha, "alpha", lower=0, upper=1)
     dtype = float_dtype(L_hat, L)
     alpha = as_float(alpha, dtype)
     return alpha * jnp.asarray(L_hat, dtype) + (1 - alpha) * jnp.asarray(L, dtype)

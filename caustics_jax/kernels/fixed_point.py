@@ -17,8 +17,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, UInt32
 
-from .._precision import float_inputs
-from ._util import check, static_int
+from .._precision import check_domain, float_inputs
+from ._util import static_int
 
 FRACTION_BITS = 28
 SCALE = 2**FRACTION_BITS
@@ -44,14 +44,13 @@ class FixedPointSum(eqx.Module):
     value: Float[Array, " segments"]
 
 
-@float_inputs("x")
+@float_inputs("x", nonnegative=("x",))
 def fixed_point_encode(x: Float[Array, "*batch"]) -> UInt32[Array, "*batch"]:
     """Float to unsigned 4.28 fixed point, round to nearest (seed 000 §3.2).
 
     Values are clipped to `[0, MAX_VALUE]`; negative input raises ValueError outside jit,
     since flux is non-negative and an unsigned word cannot hold it.
     """
-    check(x, "x", lower=0)
     x = jnp.asarray(x)
     dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.float32
     x = x.astype(dtype)
@@ -69,7 +68,6 @@ def fixed_point_decode(code: UInt32[Array, "*batch"], dtype=jnp.float32) -> Floa
     `code` holds 32-bit words: outside jit a value outside `[0, 2^32 - 1]` is refused (the
     cast to `uint32` would wrap it: -1 decoded as 16).
     """
-    check(code, "code", lower=0, upper=2**32 - 1)
     code = jnp.asarray(code, dtype=jnp.uint32)
     return code.astype(dtype) * jnp.asarray(RESOLUTION, dtype)
 
@@ -91,15 +89,15 @@ def fixed_point_accumulate(
     num_segments = static_int("fixed_point_accumulate", "num_segments", num_segments, 1, 2**24)
     x = jnp.asarray(x)
     if x.ndim != 1:
-        raise ValueError(f"x must be 1-D, got shape {x.shape}")
+        raise ValueError(f"fixed_point_accumulate: x must be 1-D, got shape {x.shape}")
     if x.shape[0] > _MAX_ADDENDS:
-        raise ValueError(f"at most 2^24 addends supported, got {x.shape[0]}")
+        raise ValueError(f"fixed_point_accumulate: at most 2^24 addends supported, got {x.shape[0]}")
     if segment_ids is None:
         segment_ids = jnp.zeros(x.shape, jnp.int32)
     segment_ids = jnp.asarray(segment_ids)
     if segment_ids.shape != x.shape:
-        raise ValueError(f"segment_ids shape {segment_ids.shape} != x shape {x.shape}")
-    check(segment_ids, "segment_ids", lower=0, upper=num_segments - 1)
+        raise ValueError(f"fixed_point_accumulate: segment_ids shape {segment_ids.shape} != x shape {x.shape}")
+    check_domain("fixed_point_accumulate", "segment_ids", segment_ids, lo=0, hi=num_segments - 1, integer=True)
     codes = fixed_point_encode(x)
 
     def byte_sum(k):

@@ -14,7 +14,7 @@ from jaxtyping import Array, Float
 
 from .._precision import float_inputs
 from ..geometry import dot, safe_normalize
-from ._util import as_float, check, check_last_axis, float_dtype, safe_div, static_int, static_real, tiny
+from ._util import as_float, check_last_axis, float_dtype, safe_div, static_int, static_real, tiny
 
 #: Eq. 19's epsilon ("a small offset value"); the paper gives no number.
 FORESHORTENING_EPS = 1e-3
@@ -22,7 +22,7 @@ FORESHORTENING_EPS = 1e-3
 PATCH = ((-1.0, 1.0), (1.0, 1.0), (-1.0, -1.0), (1.0, -1.0))
 
 
-@float_inputs("sigma", params=("q0",))
+@float_inputs("sigma", params=("q0",), nonnegative=("sigma", "q0"))
 def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*batch"]):
     """Sprite side `q` (seed 004 eq. 16).
 
@@ -31,8 +31,6 @@ def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*bat
     ratio `sigma`. The light range `r_width`, `r_height` and the map size `ccm0_x`,
     `ccm0_y` are static configuration (Python numbers); `q0` and `sigma` may be traced.
     """
-    check(sigma, "sigma", lower=0)
-    check(q0, "q0", lower=0)
     r_width = static_real("sprite_size", "r_width", r_width, 0, lo_open=True)
     r_height = static_real("sprite_size", "r_height", r_height, 0, lo_open=True)
     ccm0_x = static_int("sprite_size", "ccm0_x", ccm0_x, 2, 2**16)
@@ -43,7 +41,7 @@ def sprite_size(r_width, r_height, ccm0_x, ccm0_y, q0, sigma: Float[Array, "*bat
     return as_float(spacing * q0, dtype) * sigma.astype(dtype)
 
 
-@float_inputs("l_dir", "n_hit", params=("eps",))
+@float_inputs("l_dir", "n_hit", params=("eps",), positive=("eps",))
 def sprite_foreshortening(
     l_dir: Float[Array, "*batch 3"], n_hit: Float[Array, "*batch 3"], eps=FORESHORTENING_EPS
 ) -> Float[Array, "*batch"]:
@@ -54,7 +52,6 @@ def sprite_foreshortening(
     dtype's smallest normal number, so `a` stays finite.
     """
     check_last_axis(l_dir, "l_dir", 3)
-    check(eps, "eps", lower=0, strict=True)
     dtype = float_dtype(l_dir, n_hit)
     cos = jnp.maximum(-dot(jnp.asarray(l_dir, dtype), jnp.asarray(n_hit, dtype)), 0)
     return 1 / (cos + jnp.maximum(as_float(eps, dtype), tiny(dtype)))

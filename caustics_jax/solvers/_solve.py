@@ -214,7 +214,7 @@ def solve_local(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333
         return LocalSolve(result, prep, P, L, glob.origin, np.asarray(has_start, bool))
 
     n, dtype = P.shape[0], prep.dtype
-    eta = check_fits("eta", check_eta(eta), dtype)
+    eta = check_fits("eta", check_eta(eta), dtype, positive=True)
     if isinstance(solver, Exhaustive) and dtype != jnp.float64:  # before its float64 tol is judged
         raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
     check_tol_resolves("tol", getattr(solver, "tol", None), dtype)

@@ -122,7 +122,7 @@ def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
         I_e = np.broadcast_to(I_e, (n,))
     except ValueError:
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {I_e.shape}") from None
-    check_fits("eta", check_eta(eta), dtype)
+    check_fits("eta", check_eta(eta), dtype, positive=True)
     check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), dtype)
     check_real("same_radius", same_radius, 0, lo_open=True)
     return prep.local, P, L, n, n_P, I_e

@@ -252,7 +252,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     chunk = check_int("chunk", chunk, 1, 2**24)
     seed = check_int("seed", seed, 0, 2**32 - 1)
     intensity = check_fits("intensity", check_real("intensity", intensity, 0), mesh.dtype)
-    eta = check_fits("eta", check_eta(eta), mesh.dtype)
+    eta = check_fits("eta", check_eta(eta), mesh.dtype, positive=True)
     sigma_t = check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), mesh.dtype)
     if progress is not None and not callable(progress):
         raise ValueError(f"progress must be None or a callable progress(done, total), got {progress!r}")
