@@ -72,7 +72,24 @@ def refraction_k(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     """
     # GLSL's 1 - eta^2 (1 - cos^2), regrouped: 1 - cos^2 cancels near normal incidence and
     # 1 - eta^2 sin^2 near grazing; (1 - eta)(1 + eta) + (eta cos)^2 has neither problem.
-    return (1 - eta) * (1 + eta) + (eta * cos_i) ** 2
+    # For a large |eta| the two squares cancel: their rounding, eps eta^2, swamps k (float64
+    # eta = 1e30 gave one lane in 107 of signed_sine's records a transmitted ray, status OK,
+    # where every oblique ray is totally reflected), and from eta = 2^64 they overflow
+    # float32 (-inf + inf: NaN eagerly, +inf under jit: all 107 OK, f = 0). From
+    # `_K_LARGE_ETA` (above every physical index ratio, so physical ones are untouched)
+    # k = 1 - (eta sin)^2 with sin^2 = (1 - cos)(1 + cos): no cancellation away from the
+    # TIR onset, overflow only toward -inf (TIR), 1 at normal incidence. Double where: no
+    # inf reaches either branch's gradient.
+    ordinary = jnp.abs(eta) < _K_LARGE_ETA
+    e = jnp.where(ordinary, eta, 0)
+    large = jnp.where(ordinary, 0, eta)
+    k_large = 1 - (large * safe_sqrt((1 - cos_i) * (1 + cos_i))) ** 2
+    return jnp.where(ordinary, (1 - e) * (1 + e) + (e * cos_i) ** 2, k_large)
+
+
+#: `refraction_k` takes `1 - (eta sin)^2` from this `|eta|` on (index ratios of real
+#: materials lie below 5).
+_K_LARGE_ETA = 16.0
 
 
 @float_inputs("I", "N", params=("eta",), positive=("eta",))

@@ -168,3 +168,46 @@ def test_safe_normalize_is_unit_in_range_and_zero_where_the_square_leaves_it(dty
                                rtol=4 * float(info.eps))
     outside = jnp.asarray(np.stack([d * np.sqrt(float(info.tiny)) / 8, d * np.sqrt(float(info.max)) * 8]), dtype)
     assert np.all(np.asarray(safe_normalize(outside)) == 0)
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_refraction_k_beyond_physical_ratios_is_tir_or_one_never_nan(dtype):
+    """From |eta| = 16 `refraction_k` is `1 - (eta sin)^2`: the regrouped squares had cancelled
+    (float64 eta = 1e30: a lane transmitted) or overflowed float32 (`inf - inf`: NaN eagerly,
+    +inf under jit, every oblique ray transmitted). Compared with the oracle's sign in
+    float64 (exact there for these values), and 1 exactly at normal incidence."""
+    from caustics_jax.geometry import refraction_k
+    from caustics_jax.testing.oracle import refraction_discriminant
+    cos = np.array([-1.0, -0.999, -0.8, -0.3, 0.0, 0.5, 1.0])
+    for eta in (16.0, 1e3, 1e19, 1e30, 3e38 if dtype == jnp.float32 else 1e300):
+        c, e = jnp.asarray(cos, dtype), jnp.asarray(eta, dtype)
+        for fn in (refraction_k, jax.jit(refraction_k)):
+            k = np.asarray(fn(c, e))
+            assert not np.isnan(k).any(), (eta, k)
+            np.testing.assert_array_equal(k[np.abs(cos) == 1], 1.0)
+            oblique = np.abs(cos) < 1
+            with np.errstate(over="ignore"):
+                want = refraction_discriminant(cos[oblique], np.float64(eta))
+            np.testing.assert_array_equal(np.sign(k[oblique]), np.sign(want))
+    # physical ratios keep the regrouped form: equal to the oracle to rounding
+    cos = np.linspace(-1, 1, 41)
+    for eta in (1 / 1.333, 1.333, 2.42, 15.9):
+        k = np.asarray(refraction_k(jnp.asarray(cos, dtype), jnp.asarray(eta, dtype)))
+        tol = 8 * float(jnp.finfo(dtype).eps) * eta**2
+        np.testing.assert_allclose(k, refraction_discriminant(cos, eta), atol=tol, rtol=0)
+
+
+def test_signed_sine_at_an_unphysical_eta_is_total_internal_reflection_not_a_root():
+    """float32 signed_sine at eta = 1e30 had returned f = 0 with status OK on every record
+    (refract's k was +inf under jit); float64 on one record in 107."""
+    from caustics_jax.export import KERNELS
+    from caustics_jax.objectives import ObjectiveStatus, signed_sine_and_status
+    x, _ = KERNELS["signed_sine"].generate(np.random.default_rng(0), 32)
+    for dtype in (jnp.float32, jnp.float64):
+        args = [jnp.asarray(x[k], dtype) for k in ("V", "N", "P", "L", "ab")]
+        ok_at_1 = np.asarray(jax.jit(signed_sine_and_status)(*args, jnp.ones(len(x["eta"]), dtype))[1]) == 0
+        _, status = jax.jit(signed_sine_and_status)(*args, jnp.full(len(x["eta"]), 1e30, dtype))
+        status = np.asarray(status)
+        assert ok_at_1.sum() > 50  # the records are ordinary paths
+        assert not np.any(status == ObjectiveStatus.OK)
+        assert np.all(status[ok_at_1] == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)

@@ -66,12 +66,17 @@ def path_inputs(V, N, P, L, ab, eta):
 
 
 def adversarial_paths():
-    """TIR (P far off the normal), M = P exactly (degenerate), P above the surface."""
+    """TIR (P far off the normal), M = P exactly (degenerate), P above the surface; then a
+    refracting path with `eta` outside its domain (0, -1.333: `d_factor` invalid, as a traced
+    eta in the kernel) and beyond every physical ratio (1e30: total internal reflection;
+    refract's `k` had been `inf - inf` there and `signed_sine` a root with status OK)."""
     z = np.array([0, 0, 1.0])
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
     N = np.stack([z] * 3)
     ab = np.array([0.25, 0.25])
     M = np.array([0.25, 0.25, 0])
-    P = np.stack([M + [1.5, 0, -0.5], M, M + [0.1, 0.2, 0.5], M + [0, 0, -1.0]])
-    L = np.stack([M + [0, 0, 1.0], M + [0, 0, 1.0], M + [0, 0, 2.0], M + [0, 0, 2.0]])
-    return path_inputs(np.stack([V] * 4), np.stack([N] * 4), P, L, np.stack([ab] * 4), 1.333)
+    P = np.stack([M + [1.5, 0, -0.5], M, M + [0.1, 0.2, 0.5], M + [0, 0, -1.0]] + [M + [0.2, 0.1, -1.0]] * 3)
+    L = np.stack([M + [0, 0, 1.0], M + [0, 0, 1.0], M + [0, 0, 2.0], M + [0, 0, 2.0]] + [M + [-0.1, 0.3, 2.0]] * 3)
+    eta = np.array([1.333] * 4 + [0.0, -1.333, 1e30])
+    n = len(P)
+    return path_inputs(np.stack([V] * n), np.stack([N] * n), P, L, np.stack([ab] * n), eta)

@@ -27,10 +27,12 @@ def _gen_refract(rng, n):
     _, n_s, w_P, _, _ = f64(path_vectors, pl.V, pl.N, pl.P, pl.L, pl.ab)
     z, x = np.array([0, 0, 1.0]), np.array([1.0, 0, 0])
     g = unit(np.array([0.6, 0, -0.8]))
-    adv = {  # normal incidence, grazing, eta = 1, deep total internal reflection, exact zeros
-        "I": np.stack([-z, -z, x, x, g, g, -z, unit(np.array([0.9, 0, -0.1]))]),
-        "N": np.stack([z, z, z, z, z, z, z, z]),
-        "eta": np.array([1.333, 1 / 1.333, 1 / 1.333, 1.333, 1.0, 1.333, 1.0, 1.333]),
+    # normal incidence, grazing, eta = 1, deep total internal reflection, exact zeros; eta =
+    # 1e30, beyond every physical ratio: total internal reflection (k had been inf - inf)
+    adv = {
+        "I": np.stack([-z, -z, x, x, g, g, -z, unit(np.array([0.9, 0, -0.1])), g]),
+        "N": np.stack([z, z, z, z, z, z, z, z, z]),
+        "eta": np.array([1.333, 1 / 1.333, 1 / 1.333, 1.333, 1.0, 1.333, 1.0, 1.333, 1e30]),
     }
     return stack_cases([
         ({"I": I, "N": N, "eta": eta}, CASES["random"]),
@@ -58,8 +60,8 @@ def _gen_fresnel(rng, n):
             * rng.uniform(0.9, 1.1, m)}
     # planted: water -> air at normal incidence, R = ((eta - 1)/(eta + 1))^2 in closed form
     planted_ = {"cos_i": np.ones(n_pl), "eta": rng.uniform(0.5, 2.0, n_pl)}
-    adv = {"cos_i": np.array([0.0, 0.0, 1.0, 1.0, 0.5, 0.2, 1.0, 0.0]),
-           "eta": np.array([1 / 1.333, 1.333, 1.0, 1.333, 1.0, 1.333, 2.0, 1.0])}
+    adv = {"cos_i": np.array([0.0, 0.0, 1.0, 1.0, 0.5, 0.2, 1.0, 0.0, 0.6]),  # last: eta 1e30, TIR (R = 1)
+           "eta": np.array([1 / 1.333, 1.333, 1.0, 1.333, 1.0, 1.333, 2.0, 1.0, 1e30])}
     return stack_cases([(rand, CASES["random"]), (planted_, CASES["planted"]), (adv, CASES["adversarial"])])
 
 

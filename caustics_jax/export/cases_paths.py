@@ -121,6 +121,17 @@ def _gen_photon(rng, n):
         "eta": np.full(3, 1.333), "t_hit": np.array([1.0, 2.0, 3.0]), "s": np.array([2.0, 1.5, 2.0]),
         "c": np.array([1.0, 0.0, 2.0]),
     }
+    # the kernel's invalid lanes (sigma 0), one per condition on a valid texel triangle: a zero
+    # normal, a normal of length 2, light from below, t' = 0, eta = 0, s < 1, c fractional,
+    # c < 0 (each had given a finite sigma in the port, up to 57)
+    k = 8
+    tilt = unit([0.1, 0, 1.0])
+    bad = {"x00": np.zeros((k, 3)), "x10": np.tile([0.01, 0, 0.001], (k, 1)), "x01": np.tile([0, 0.01, 0.0], (k, 1)),
+           "n00": np.stack([z] * k), "n10": np.stack([np.zeros(3), 2 * tilt] + [tilt] * (k - 2)),
+           "n01": np.stack([z] * k), "l_dir": np.stack([-z, -z, z] + [-z] * (k - 3)),
+           "eta": np.array([1.333] * 4 + [0.0] + [1.333] * 3), "t_hit": np.array([1.0] * 3 + [0.0] + [1.0] * 4),
+           "s": np.array([2.0] * 5 + [0.5, 2.0, 2.0]), "c": np.array([1.0] * 6 + [1.5, -1.0])}
+    adv = {key: np.concatenate([adv[key], bad[key]]) for key in adv}
     return stack_cases([(rand, CASES["random"]), (planted_, CASES["planted"]), (adv, CASES["adversarial"])])
 
 

@@ -103,12 +103,17 @@ def _gen_photon_intensity(rng, n):
     n_pl_up = unit(rng.normal(size=(n_pl, 3)) * [0.2, 0.2, 0] + [0, 0, 1])
     planted = rows(n_pl, rng.uniform(0, 1, n_pl), n_pl_up, -n_pl_up, rng.uniform(0, 0.2, n_pl), np.full(n_pl, 5.0))
     z = np.array([0, 0, 1.0])
-    m = 6  # t at the surface, at the peak (1 - gamma) t_max, at t_max; grazing and back-facing light
-    adv = {"t": np.array([0.0, 0.25, 4.0, 1.0, 1.0, 1.0]), "t_max": np.array([4.0, 5.0, 4.0, 2.0, 2.0, 2.0]),
-           "gamma": np.array([0.95, 0.95, 0.95, 0.5, 0.5, 0.5]),
-           "l_dir": np.array([[0, 0, -1.0], [0, 0, -1.0], [0, 0, -1.0], [1.0, 0, 0], [0, 0, 1.0], [0.6, 0, -0.8]]),
-           "n": np.stack([z] * m), "f_frac": np.array([0.02, 0.02, 0.02, 0.02, 0.02, 1.0]),
-           "f_exp": np.array([5.0, 5.0, 5.0, 5.0, 5.0, 5.0]), "L": np.array([1.0, 2.0, 1.0, 1.0, 1.0, 1.0])}
+    # t at the surface, at the peak (1 - gamma) t_max, at t_max; grazing and back-facing light;
+    # then t_max = 0, gamma = -1 and 2: floored and clipped into (0, 1) as the kernel inside jit
+    # (the port had given NaN and other finite values)
+    m = 9
+    adv = {"t": np.array([0.0, 0.25, 4.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]),
+           "t_max": np.array([4.0, 5.0, 4.0, 2.0, 2.0, 2.0, 0.0, 2.0, 2.0]),
+           "gamma": np.array([0.95, 0.95, 0.95, 0.5, 0.5, 0.5, 0.5, -1.0, 2.0]),
+           "l_dir": np.array([[0, 0, -1.0], [0, 0, -1.0], [0, 0, -1.0], [1.0, 0, 0], [0, 0, 1.0], [0.6, 0, -0.8]]
+                             + [[0.6, 0, -0.8]] * 3),
+           "n": np.stack([z] * m), "f_frac": np.array([0.02, 0.02, 0.02, 0.02, 0.02, 1.0, 0.02, 0.02, 0.02]),
+           "f_exp": np.full(m, 5.0), "L": np.array([1.0, 2.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])}
     return stack_cases([(rand, CASES["random"]), (planted, CASES["planted"]), (adv, CASES["adversarial"])])
 
 

@@ -56,10 +56,11 @@ def _gen_bilateral(rng, n):
     z = rng.uniform(0.1, 50, n_pl)
     planted = {"z_p": z, "z_q": z, "pos_p": pp, "pos_q": pp, "delta": rng.choice([15.0, 2.0, 1.0], n_pl),
                "eps": rng.choice([1.0, 0.5, 0.25], n_pl)}
-    adv = {"z_p": np.array([0.1, 1e4, 1.0, 1.0]), "z_q": np.array([1e4, 0.1, 1.0, 1.0 + 2**-20]),
-           "pos_p": np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0.0]]),
-           "pos_q": np.array([[0, 0, 0], [1e3, 0, 0], [1e-3, 0, 0], [0, 0, 0.0]]),
-           "delta": np.array([1.0, 1.0, 1e-4, 15.0]), "eps": np.array([1.0, 1.0, 1e-6, 1e-6])}
+    # the last record: eps = -1, floored at the smallest normal number (as the kernel inside jit)
+    adv = {"z_p": np.array([0.1, 1e4, 1.0, 1.0, 1.0]), "z_q": np.array([1e4, 0.1, 1.0, 1.0 + 2**-20, 1.5]),
+           "pos_p": np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0.0], [0, 0, 0.0]]),
+           "pos_q": np.array([[0, 0, 0], [1e3, 0, 0], [1e-3, 0, 0], [0, 0, 0.0], [0.5, 0, 0.0]]),
+           "delta": np.array([1.0, 1.0, 1e-4, 15.0, 1.0]), "eps": np.array([1.0, 1.0, 1e-6, 1e-6, -1.0])}
     return stack_cases([(rand, CASES["random"]), (planted, CASES["planted"]), (adv, CASES["adversarial"])])
 
 

@@ -6,7 +6,6 @@
 
 // float32 values of the testbed's constants, rounded once from float64 (a float32 expression
 // like 8.0 * sqrt(CJ_EPS) could round differently on a device).
-const float CJ_TINY = 1.1754944e-38;             // jnp.finfo(float32).tiny
 const float CJ_PI_2 = 1.5707964;                 // pi / 2
 const float CJ_SQRT_EPS = 3.4526698e-04;         // sqrt(eps)
 const float CJ_ENTRY_GAP = 2.7621358e-03;        // 8 sqrt(eps): the entry point recomputed

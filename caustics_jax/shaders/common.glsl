@@ -7,10 +7,14 @@
 const float CJ_EPS = 1.1920929e-7;  // float32 machine epsilon, jnp.finfo(float32).eps
 const float CJ_PI = 3.14159265358979;
 const float CJ_INF = 1.0 / 0.0;
+const float CJ_TINY = 1.1754944e-38;  // jnp.finfo(float32).tiny, the smallest normal float32
 
 float cj_safe_sqrt(float x) { return x > 0.0 ? sqrt(x) : 0.0; }
 
 // ---------------------------------------------------------------- geometry (MATH.md §1)
+
+// A finite number > 0 (NaN and inf fail).
+bool cj_finite_positive(float x) { return x > 0.0 && !isinf(x); }
 
 // geometry.norm / safe_normalize: |v|, and v / |v| or the zero vector (never NaN).
 float cj_norm(vec3 v) { return cj_safe_sqrt(dot(v, v)); }
@@ -21,9 +25,13 @@ vec3 cj_safe_normalize(vec3 v) {
 }
 
 // geometry.refraction_k: refract's k = 1 - eta^2 (1 - cos^2) = cos_t^2 (seed 002 eq. 3.1),
-// regrouped as (1 - eta)(1 + eta) + (eta cos)^2, free of both cancellations.
+// regrouped as (1 - eta)(1 + eta) + (eta cos)^2, free of both cancellations; from |eta| = 16
+// (above every physical ratio) 1 - (eta sin)^2, whose squares neither cancel nor overflow
+// to NaN (inf - inf had made eta = 1e30 a transmitted ray).
 float cj_refraction_k(float cos_i, float eta) {
-    return (1.0 - eta) * (1.0 + eta) + (eta * cos_i) * (eta * cos_i);
+    if (abs(eta) < 16.0) return (1.0 - eta) * (1.0 + eta) + (eta * cos_i) * (eta * cos_i);
+    float s = eta * cj_safe_sqrt((1.0 - cos_i) * (1.0 + cos_i));
+    return 1.0 - s * s;
 }
 
 // GLSL refract semantics (MATH.md §1; seed 002 eq. 3.1-3.2), with the Python kernel's
@@ -31,13 +39,14 @@ float cj_refraction_k(float cos_i, float eta) {
 vec3 cj_refract(vec3 I, vec3 N, float eta) {
     float cos_i = dot(N, I);
     float k = cj_refraction_k(cos_i, eta);
-    if (k < 0.0) return vec3(0.0);
+    if (!(k >= 0.0)) return vec3(0.0);  // TIR, or NaN input: no ray (the kernel's k >= 0 mask)
     return eta * I - (eta * cos_i + cj_safe_sqrt(k)) * N;
 }
 
 // Exact unpolarised dielectric Fresnel reflectance, the F of seed 001 eq. 25
 // (geometry.fresnel_reflectance): R = (r_s^2 + r_p^2) / 2, R = 1 under TIR and at grazing.
 float cj_fresnel_reflectance(float cos_i, float eta) {
+    if (isnan(cos_i)) return 1.0;  // clamp(NaN) is undefined in GLSL; the kernel's NaN lane gives 1
     cos_i = clamp(abs(cos_i), 0.0, 1.0);
     float cos_t2 = cj_refraction_k(cos_i, eta);  // 1 - sin_t^2
     float cos_t = cj_safe_sqrt(cos_t2);
@@ -102,7 +111,9 @@ bool cj_path_vectors(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab,
     n_s = cj_safe_normalize(n_tilde);
     w_P = cj_safe_normalize(PM);
     w_L = cj_safe_normalize(LM);
-    return cj_norm(n_tilde) == 0.0 || cj_norm(PM) == 0.0 || cj_norm(LM) == 0.0;  // degenerate
+    // degenerate: a zero length, or one that is not finite (an inf P had read as a root, OK)
+    return !(cj_finite_positive(cj_norm(n_tilde)) && cj_finite_positive(cj_norm(PM))
+             && cj_finite_positive(cj_norm(LM)));
 }
 
 // objectives.orthonormal_frame: branchless basis (s, t) of Duff et al. 2017.
@@ -155,7 +166,9 @@ vec2 cj_conic_tangent(float coef[6], vec2 ab) {
 // sqrt(disc)) / 2, roots q / q2 and q0 / q; linear, tangent and all-zero cases masked.
 void cj_solve_quadratic(float q2, float q1, float q0, out vec2 roots, out bvec2 valid) {
     float scale = max(max(abs(q2), abs(q1)), abs(q0));
-    bool nonzero = scale > 0.0;
+    // frexp of inf or NaN is undefined: such coefficients have no roots (the kernel's
+    // division by an infinite scale gives NaN, never valid)
+    bool nonzero = scale > 0.0 && !isinf(scale) && !isnan(q2 + q1 + q0);
     int e;
     frexp(nonzero ? scale : 1.0, e);
     float a = ldexp(q2, -e), b = ldexp(q1, -e), c = ldexp(q0, -e);
@@ -278,7 +291,8 @@ void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float 
     bool ok_g = abs(cos_g) > tiny;
     bool ok_L = cos_L > tiny;
     bool tri_ok = cj_norm(cross(E1, E2)) > tiny * cj_norm(E1) * cj_norm(E2);
-    bool ok = !degenerate && tri_ok && ok_g && ok_L && cos_P < 0.0 && k > 0.0;
+    // eta > 0 (finite: checked with D below): a traced eta outside its domain is an invalid lane
+    bool ok = !degenerate && tri_ok && ok_g && ok_L && cos_P < 0.0 && k > 0.0 && eta > 0.0;
 
     vec3 W[2];
     cj_orthonormal_frame(w_P, W[0], W[1]);  // (w_perp, w_par)
@@ -294,7 +308,9 @@ void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float 
         vec3 w_L_d = -eta * W[j] + mu_d * n_s + mu * n_s_d;         // eq. 31, -eta
         L_d[j] = M_d - dot(M_d, w_L) * w_L + d_L * w_L_d;           // eq. 32
     }
-    D = ok ? cj_norm(cross(L_d[0], L_d[1])) : 0.0;                  // eq. 33
+    D = cj_norm(cross(L_d[0], L_d[1]));                             // eq. 33
+    ok = ok && cj_finite_positive(D);  // overflow beyond the scale band is no valid D
+    D = ok ? D : 0.0;
     valid = ok ? 1u : 0u;
 }
 
@@ -323,7 +339,7 @@ float cj_path_irradiance(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float et
 // delta^2 alone underflows (delta = 1e-23, p = q: 0/0) or overflows (delta = |d| = 1e30).
 float cj_bilateral_weight(float z_p, float z_q, vec3 pos_p, vec3 pos_q, float delta, float eps) {
     vec3 d = pos_p - pos_q;
-    float w_z = 1.0 / (abs(z_p - z_q) + eps);
+    float w_z = 1.0 / (abs(z_p - z_q) + max(eps, CJ_TINY));  // eps floored, as the kernel inside jit
     float m = max(abs(delta), max(abs(d.x), max(abs(d.y), abs(d.z))));
     if (m > 0.0) {
         d /= m;
