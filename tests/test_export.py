@@ -657,3 +657,79 @@ def test_the_building_blocks_check_what_export_checks(tmp_path):
                    {k: v for k, v in manifest.items() if k != "stride"}):
         with pytest.raises(ValueError, match="malformed manifest"):
             ex.read_records(broken, raw)
+
+
+def _port_start_faces(V, F, P, L):
+    """The GLSL port's general start point (start_point.glsl, cj_start_point_general), in
+    numpy float32: Möller-Trumbore with a fixed 16 eps, the lowest `s` wins, ties the lowest
+    face index. `(face, ab)`, face -1 where none."""
+    f32 = np.float32
+    V = V.astype(f32)[F]
+    d = (L - P).astype(f32)
+    e1, e2 = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
+    face, ab = np.full(len(P), -1), np.zeros((len(P), 2), f32)
+    tol = f32(16) * np.finfo(f32).eps
+    for k in range(len(P)):
+        pvec = np.cross(d[k], e2)
+        det = np.sum(e1 * pvec, -1)
+        scale = np.sqrt(np.sum(d[k] * d[k]) * np.sum(e1 * e1, -1) * np.sum(e2 * e2, -1))
+        ok = np.abs(det) > tol * scale
+        inv = np.where(ok, f32(1) / np.where(ok, det, f32(1)), f32(0))
+        tvec = P[k].astype(f32) - V[:, 0]
+        qvec = np.cross(tvec, e1)
+        a, b, s = np.sum(tvec * pvec, -1) * inv, (qvec @ d[k]) * inv, np.sum(e2 * qvec, -1) * inv
+        hit = ok & (a >= -tol) & (b >= -tol) & (a + b <= 1 + tol) & (s >= -tol) & (s <= 1 + tol)
+        if hit.any():
+            j = np.flatnonzero(hit)[np.argmin(s[hit])]  # argmin: the first of equal s
+            a_j, b_j = max(a[j], 0), max(b[j], 0)
+            face[k], ab[k] = j, np.array([a_j, b_j]) / max(a_j + b_j, 1)
+    return face, ab
+
+
+def test_a_conditioned_lane_ends_the_same_from_the_port_s_start_face(tmp_path):
+    """Vertical segments through vertices and edge midpoints of a wavy pool: the start face
+    is a tie between the faces meeting there, which the GLSL port breaks by the lowest `s`
+    and face index (the testbed by `Crossing.rank`). A hostile probe found lanes FOUND from
+    the testbed's face and LEFT_MESH from the port's marked conditioned, so the port failed
+    the 99.9% status criterion; such lanes are not conditioned now. Here the JAX walk from
+    the port's start face must end as the exported lane on every conditioned lane."""
+
+    import caustics_jax as cj
+    from caustics_jax.export import scene_cases as scn
+    from caustics_jax.export import scene_records as sr
+    from caustics_jax.export.records import CASES
+    from caustics_jax.export.scene_registry import SceneData, SceneSpec
+    from caustics_jax.export.scene_writer import export_scene
+
+    def build(rng, n):
+        V, F, N, grid = scn._surface(scn._pool(rng, 4, amplitude=0.03))
+        pick = np.random.default_rng(7)
+        half = n // 2
+        f = pick.integers(len(F), size=n)
+        k = pick.integers(3, size=n)
+        xy = np.concatenate([V[F[f[:half], k[:half]], :2],
+                             0.5 * (V[F[f[half:], k[half:]], :2] + V[F[f[half:], (k[half:] + 1) % 3], :2])])
+        P = np.c_[xy, np.full(n, -0.9)]
+        L = np.c_[xy, pick.uniform(1.0, 10.0, n)]
+        return SceneData(V, F, N, grid, P, L, receiver_normal=np.tile([0.0, 0, 1], (n, 1)), intensity=np.ones(n),
+                         sigma_t=np.zeros(n), case=np.full(n, CASES["adversarial"], np.uint32), eta=scn.ETA,
+                         source="vertical segments through vertices and edge midpoints")
+
+    manifest, raw = export_scene(SceneSpec("ties", "start-face ties", build), 96, 0)
+    (tmp_path / "ties.json").write_text(json.dumps(manifest))
+    (tmp_path / "ties.bin").write_bytes(raw)
+    _, buffers = sr.load_scene(tmp_path, "ties")
+    lanes = buffers["lanes"]
+    V, F = buffers["vertices"]["position"].astype(np.float64), buffers["faces"]["v"].astype(np.int64)
+    P, L = lanes["P"], lanes["L"]
+    face, ab = _port_start_faces(V, F, P, L)
+    other = face != lanes["start_face"]
+    assert other.sum() >= 10  # the port's tie-break differs on many of these lanes
+    with cj.precision("float32"):
+        mesh = cj.SurfaceMesh.from_arrays(V.astype(np.float32), F, normals=buffers["vertices"]["normal"])
+        walk = cj.solve(mesh, P, L, eta=float(manifest["eta"]), method=cj.Walk(), features=None,
+                        start=(face.astype(np.int32), ab, face >= 0))
+    differs = np.asarray(walk.status) != lanes["status"]
+    conditioned = lanes["conditioned"] == 1
+    assert not np.any(differs & conditioned), np.flatnonzero(differs & conditioned)
+    assert conditioned.sum() >= 24  # ties whose walks agree stay judged

@@ -31,6 +31,7 @@ from .._precision import precision
 from ..arcs import project_to_conic
 from ..arguments import check_int
 from ..conic import conic_coefficients, conic_tangent, edge_quadratics, tangent_to_world
+from ..crossing import triangle_crossing
 from ..mesh import SurfaceMesh
 from ..objectives import ObjectiveStatus, bracket_objective
 from ..prepared import prepare
@@ -88,6 +89,55 @@ def _df_ds(V, N, P, L, ab, eta):
     f, st, _ = jax.vmap(bracket_objective)(V, N, P, L, ends, jnp.broadcast_to(eta, P.shape[:1]))
     ok = jnp.all(st == ObjectiveStatus.OK, -1) & (length > 0)
     return jnp.where(ok, jnp.abs(f[:, 1] - f[:, 0]) / (2 * CURVE_STEP), 0)
+
+
+def _ties_agree(mesh, P, L, start, status, eta, walk) -> np.ndarray:
+    """Per lane, whether the walk ends with `status` from every face that ties with the
+    start face, and from points a few ulps around each tied start: another face sharing a
+    vertex with the start face that holds the crossing within its rounding tolerance and
+    within both tolerances of the start's `s` (`crossing.triangle_crossing`, float32 as the
+    testbed's). At a shared edge or vertex the face is a tie that a port breaks its own way
+    (its traversal, its tolerance: the GLSL start point takes the lowest `s` at a fixed
+    16 eps), and the walk from the next face may end otherwise: a probe of vertical
+    segments through vertices and edge midpoints of the wavy pool (48 lanes, 24 with a
+    different start face in the port) found 3 lanes FOUND from the testbed's face and
+    LEFT_MESH from the port's. The JAX walk from the port's face ends as the port does on
+    2 of them; the third flips with one ulp of the start point, hence the nudges."""
+    faces = np.asarray(mesh.faces)
+    n_vertices = int(np.asarray(mesh.vertices).shape[0])
+    flat = faces.ravel()
+    order = np.argsort(flat, kind="stable")
+    first = np.searchsorted(flat[order], np.arange(n_vertices + 1))
+    face0, found = np.asarray(start.face), np.asarray(start.found)
+    lanes = np.flatnonzero(found)
+    near = [np.unique(np.concatenate([order[first[v]:first[v + 1]] // 3 for v in faces[f]])) for f in face0[lanes]]
+    agree = np.ones(len(found), bool)
+    width = max((len(x) for x in near), default=0)
+    if width == 0:
+        return agree
+    cand = np.full((len(lanes), width), -1)
+    for row, x in enumerate(near):
+        cand[row, :len(x)] = x
+    P_np, L_np = np.asarray(P), np.asarray(L)
+    P_l, d_l = P_np[lanes], L_np[lanes] - P_np[lanes]
+    V = np.asarray(mesh.vertices)[faces]
+    c0 = triangle_crossing(jnp.asarray(P_l), jnp.asarray(d_l), jnp.asarray(V[face0[lanes]]))
+    c = triangle_crossing(jnp.asarray(P_l)[:, None], jnp.asarray(d_l)[:, None], jnp.asarray(V[np.maximum(cand, 0)]))
+    close = np.abs(np.asarray(c.s) - np.asarray(c0.s)[:, None]) <= np.asarray(c.s_tol) + np.asarray(c0.s_tol)[:, None]
+    tie = np.asarray(c.inside) & (cand >= 0) & (cand != face0[lanes][:, None]) & close
+    rows, cols = np.nonzero(tie)
+    if rows.size == 0:
+        return agree
+    idx = lanes[rows]
+    ab = np.asarray(c.ab)[rows, cols].astype(np.float64)
+    delta = 8 * float(np.finfo(np.float32).eps)
+    for nudge in ((0, 0), (1, 1), (-1, -1), (1, -1), (-1, 1)):
+        x = np.maximum(ab + delta * np.asarray(nudge, np.float64), 0)
+        x = (x / np.maximum(x.sum(-1, keepdims=True), 1)).astype(np.float32)  # into the closed face
+        other = solve(mesh, P_np[idx], L_np[idx], eta=eta, method=walk, features=None,
+                      start=(cand[rows, cols].astype(np.int32), x, np.ones(rows.size, bool)))
+        np.logical_and.at(agree, idx, np.asarray(other.status) == np.asarray(status)[idx])
+    return agree
 
 
 def _transport(mesh, sol, P, L, n_P, intensity, sigma_t, eta):
@@ -157,6 +207,7 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
             other = solve(moved, jnp.asarray(_nudged(f32["P"], nudge)), jnp.asarray(_nudged(f32["L"], nudge)),
                           eta=eta, method=walk, features=None)
             stable &= np.asarray(other.status) == np.asarray(sol.status)
+        stable &= _ties_agree(mesh, P, L, start, sol.status, eta, walk)
         D, D_valid, E = _transport(mesh, sol, P, L, jnp.asarray(f32["receiver_normal"]),
                                    jnp.asarray(f32["intensity"]), jnp.asarray(f32["sigma_t"]), eta)
     x64 = {k: v.astype(np.float64) for k, v in f32.items()}
