@@ -251,15 +251,20 @@ _DOMAIN_HINTS = {"eta": " (eta_in / eta_out, water 1.333)", "edge": " (edge k jo
                  "level": " (a cascade level c)"}
 
 
+def _number(x) -> str:
+    """A bound as written: whole numbers in full (16777215, not 1.67772e+07), others `:g`."""
+    return str(int(x)) if float(x).is_integer() else f"{x:g}"
+
+
 def _domain_words(lo, hi, strict: bool, whole: bool, integer: bool, hi_strict: bool = False) -> str:
     """`finite and > 0`, `finite, whole and >= 0`, `in [0, 2]`, `in (0, 1)` (an integer
     argument is finite and whole)."""
     if lo is not None and hi is not None:
-        bound = [f"in {'(' if strict else '['}{lo:g}, {hi:g}{')' if hi_strict else ']'}"]
+        bound = [f"in {'(' if strict else '['}{_number(lo)}, {_number(hi)}{')' if hi_strict else ']'}"]
     elif lo is not None:
-        bound = [f"{'>' if strict else '>='} {lo:g}"]
+        bound = [f"{'>' if strict else '>='} {_number(lo)}"]
     else:
-        bound = [f"{'<' if hi_strict else '<='} {hi:g}"] if hi is not None else []
+        bound = [f"{'<' if hi_strict else '<='} {_number(hi)}"] if hi is not None else []
     parts = ([] if integer else ["finite"] + (["whole"] if whole else [])) + bound
     return ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else parts[0]
 
@@ -292,6 +297,14 @@ def check_domain(fn_name: str, name: str, value, *, lo=None, hi=None, strict: bo
     if dtype is not None and jnp.issubdtype(dtype, jnp.floating):
         check_fits(f"{fn_name}: {name}", v64, jnp.dtype(dtype), positive=lo == 0 and strict,
                    whose="the kernel's dtype")
+        # and as the kernel sees it: float32 rounds 3.14159265 up onto an open bound pi
+        cast = v64.astype(jnp.dtype(dtype)).astype(np.float64)
+        bad = ~in_domain(cast, lo=lo, hi=hi, strict=strict, hi_strict=hi_strict, whole=whole, xp=np)
+        if np.any(bad):
+            words = _domain_words(lo, hi, strict, whole, integer, hi_strict)
+            raise ValueError(f"{fn_name}: {name} must be {words} in {jnp.dtype(dtype).name}, got "
+                             f"{v[bad].reshape(-1)[:3].tolist()}, which rounds to "
+                             f"{cast[bad].reshape(-1)[:3].tolist()}{_DOMAIN_HINTS.get(name, '')}")
 
 
 def in_domain(x, *, lo=None, hi=None, strict: bool = False, hi_strict: bool = False, whole: bool = False,

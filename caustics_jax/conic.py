@@ -146,13 +146,14 @@ def solve_quadratic(
     - `q2 = 0`: the single linear root `-q0 / q1`;
     - `|disc| <= 8 eps (q1^2 + |4 q2 q0|)` (zero within rounding): tangency, one double
       root `-q1 / 2 q2` reported once; two roots that close are not separable anyway;
-    - all coefficients zero (the whole line lies on the conic): no isolated root.
+    - all coefficients zero (the whole line lies on the conic): no isolated root;
+    - a coefficient not finite: no root (an infinite one had given a NaN root marked valid).
     Returns `(roots, valid)`; invalid lanes hold 0.
     """
     dtype = jnp.result_type(q2, q1, q0)
     eps = jnp.finfo(dtype).eps
     scale = jnp.maximum(jnp.maximum(jnp.abs(q2), jnp.abs(q1)), jnp.abs(q0))
-    nonzero = scale > 0
+    nonzero = (scale > 0) & jnp.isfinite(scale)
     # Scale by a power of two (exact) so that the largest coefficient is in [1, 2).
     pow2 = power_of_two_floor(jnp.where(nonzero, scale, 1))
     pow2 = jnp.where(pow2 > 0, pow2, 1)  # (a subnormal scale: left unscaled)

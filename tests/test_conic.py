@@ -364,3 +364,18 @@ def test_power_of_two_floor_is_exact_over_the_whole_normal_range(dtype):
     mantissa, _ = np.frexp(p)
     assert np.all(mantissa == 0.5)  # a power of two
     assert np.asarray(power_of_two_floor(jnp.asarray(info.smallest_subnormal, dtype))) == 0
+
+
+def test_a_quadratic_with_a_coefficient_not_finite_has_no_root():
+    """An infinite coefficient had given a NaN root marked valid (the GLSL port: no roots)."""
+    import caustics_jax as cj
+    for dtype in (jnp.float32, jnp.float64):
+        for q in ((1.0, np.inf, 1.0), (0.0, np.inf, 1.0), (np.inf, 1.0, 0.0), (1.0, -np.inf, 2.0),
+                  (np.nan, 1.0, 1.0), (1.0, 1.0, np.nan)):
+            for fn in (cj.solve_quadratic, jax.jit(cj.solve_quadratic)):
+                roots, valid = fn(*(jnp.asarray(x, dtype) for x in q))
+                assert not np.asarray(valid).any(), (q, roots, valid)
+                assert np.all(np.asarray(roots) == 0)
+        roots, valid = cj.solve_quadratic(*(jnp.asarray(x, dtype) for x in (1.0, -3.0, 2.0)))
+        np.testing.assert_allclose(np.asarray(roots), [1.0, 2.0])  # finite ones as before
+        assert np.asarray(valid).all()

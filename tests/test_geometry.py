@@ -211,3 +211,14 @@ def test_signed_sine_at_an_unphysical_eta_is_total_internal_reflection_not_a_roo
         assert ok_at_1.sum() > 50  # the records are ordinary paths
         assert not np.any(status == ObjectiveStatus.OK)
         assert np.all(status[ok_at_1] == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION)
+
+
+def test_refraction_k_derivative_beyond_physical_ratios_is_exact_at_normal_incidence():
+    """d k / d cos = 2 eta^2 cos: the large-eta form had used a sqrt, whose derivative at
+    |cos| = 1 is cut to 0 (0 instead of -800 at eta = 20)."""
+    from caustics_jax.geometry import refraction_k
+    for dtype in (jnp.float32, jnp.float64):
+        for eta in (1.333, 20.0, 1e3):
+            for cos in (-1.0, -0.6, 1.0):
+                g = jax.grad(refraction_k)(jnp.asarray(cos, dtype), jnp.asarray(eta, dtype))
+                np.testing.assert_allclose(float(g), 2 * eta**2 * cos, rtol=1e-6)

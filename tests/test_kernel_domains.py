@@ -294,6 +294,14 @@ DECLARED = {
                                   "cascade_intensity_scale: s must be finite and >= 1"),
     "fresnel_reflect_approx f_frac": (lambda: K.fresnel_reflect_approx(-_Z, _Z, 2.0),
                                       r"fresnel_reflect_approx: f_frac must be finite and in \[0, 1\]"),
+    "ray_cone_propagate spread rounding onto pi": (
+        lambda: K.ray_cone_propagate(_ONE.astype(np.float32), np.array(3.14159265), _ONE.astype(np.float32)),
+        r"spread must be finite and in \[0, 3.14159\) in float32, got \[3.14159265\], which rounds to"),
+    "intensity_attenuation gamma rounding onto 1": (lambda: K.intensity_attenuation(_ONE, 10.0, 1 - 1e-9),
+                                                    r"gamma must be finite and in \(0, 1\) in float32"),
+    "fixed_point_accumulate whole bound": (
+        lambda: K.fixed_point_accumulate(np.array([1.0]), np.array([2**24]), 2**24),
+        r"segment_ids must be in \[0, 16777215\]"),
     "refract eta subnormal": (lambda: cj.refract(-_Z.astype(np.float32), _Z.astype(np.float32), 1e-40),
                               "refract: eta must be at least 1.175e-38, the smallest normal float32"),
     "refract eta overflow": (lambda: cj.refract(-_Z.astype(np.float32), _Z.astype(np.float32), 1e39),

@@ -91,6 +91,21 @@ def _df_ds(V, N, P, L, ab, eta):
     return jnp.where(ok, jnp.abs(f[:, 1] - f[:, 0]) / (2 * CURVE_STEP), 0)
 
 
+#: Lanes per call of `_tie_crossings` (fixed, so one compile per neighbour-table width).
+_TIE_CHUNK = 4096
+
+
+@jax.jit
+def _tie_crossings(P, d, V0, V_near):
+    """`(inside, close, ab)` of each lane's segment with its neighbour faces `V_near`
+    (`(n, w, 3, 3)`): in the face within its rounding bound, and at the start face's `s`
+    (`V0`) within both bounds (`crossing.triangle_crossing`)."""
+    c0 = triangle_crossing(P, d, V0)
+    c = triangle_crossing(P[:, None], d[:, None], V_near)
+    close = jnp.abs(c.s - c0.s[:, None]) <= c.s_tol + c0.s_tol[:, None]
+    return c.inside, close, c.ab
+
+
 def _ties_agree(mesh, P, L, start, status, eta, walk) -> np.ndarray:
     """Per lane, whether the walk ends with `status` from every face that ties with the
     start face, and from points a few ulps around each tied start: another face sharing a
@@ -104,32 +119,41 @@ def _ties_agree(mesh, P, L, start, status, eta, walk) -> np.ndarray:
     LEFT_MESH from the port's. The JAX walk from the port's face ends as the port does on
     2 of them; the third flips with one ulp of the start point, hence the nudges."""
     faces = np.asarray(mesh.faces)
-    n_vertices = int(np.asarray(mesh.vertices).shape[0])
-    flat = faces.ravel()
-    order = np.argsort(flat, kind="stable")
-    first = np.searchsorted(flat[order], np.arange(n_vertices + 1))
     face0, found = np.asarray(start.face), np.asarray(start.found)
     lanes = np.flatnonzero(found)
-    near = [np.unique(np.concatenate([order[first[v]:first[v + 1]] // 3 for v in faces[f]])) for f in face0[lanes]]
     agree = np.ones(len(found), bool)
-    width = max((len(x) for x in near), default=0)
-    if width == 0:
+    if lanes.size == 0:
         return agree
-    cand = np.full((len(lanes), width), -1)
+    # faces sharing a vertex with each start face, one padded row per face used (host, once)
+    flat = faces.ravel()
+    order = np.argsort(flat, kind="stable")
+    first = np.searchsorted(flat[order], np.arange(int(np.asarray(mesh.vertices).shape[0]) + 1))
+    used, row_of = np.unique(face0[lanes], return_inverse=True)
+    near = [np.unique(np.concatenate([order[first[v]:first[v + 1]] // 3 for v in faces[f]])) for f in used]
+    width = -(-max(len(x) for x in near) // 16) * 16  # a multiple of 16: few compiles
+    table = np.full((len(used), width), -1)
     for row, x in enumerate(near):
-        cand[row, :len(x)] = x
+        table[row, :len(x)] = x
+    cand = table[row_of]
     P_np, L_np = np.asarray(P), np.asarray(L)
-    P_l, d_l = P_np[lanes], L_np[lanes] - P_np[lanes]
     V = np.asarray(mesh.vertices)[faces]
-    c0 = triangle_crossing(jnp.asarray(P_l), jnp.asarray(d_l), jnp.asarray(V[face0[lanes]]))
-    c = triangle_crossing(jnp.asarray(P_l)[:, None], jnp.asarray(d_l)[:, None], jnp.asarray(V[np.maximum(cand, 0)]))
-    close = np.abs(np.asarray(c.s) - np.asarray(c0.s)[:, None]) <= np.asarray(c.s_tol) + np.asarray(c0.s_tol)[:, None]
-    tie = np.asarray(c.inside) & (cand >= 0) & (cand != face0[lanes][:, None]) & close
+    tie = np.zeros(cand.shape, bool)
+    ab = np.zeros(cand.shape + (2,), np.float64)
+    for lo in range(0, lanes.size, _TIE_CHUNK):  # fixed-size chunks: one compile per width
+        part = lanes[lo:lo + _TIE_CHUNK]
+        pad = np.r_[part, np.full(_TIE_CHUNK - part.size, part[0])]
+        P_c, d_c = P_np[pad], L_np[pad] - P_np[pad]
+        rows = np.r_[np.arange(lo, lo + part.size), np.full(_TIE_CHUNK - part.size, lo)]
+        inside, close, ab_c = (np.asarray(x) for x in _tie_crossings(
+            P_c, d_c, V[face0[pad]], V[np.maximum(cand[rows], 0)]))
+        n = part.size
+        tie[lo:lo + n] = inside[:n] & close[:n] & (cand[lo:lo + n] >= 0) & (cand[lo:lo + n] != face0[part][:, None])
+        ab[lo:lo + n] = ab_c[:n]
     rows, cols = np.nonzero(tie)
     if rows.size == 0:
         return agree
     idx = lanes[rows]
-    ab = np.asarray(c.ab)[rows, cols].astype(np.float64)
+    ab = ab[rows, cols]
     delta = 8 * float(np.finfo(np.float32).eps)
     for nudge in ((0, 0), (1, 1), (-1, -1), (1, -1), (-1, 1)):
         x = np.maximum(ab + delta * np.asarray(nudge, np.float64), 0)

@@ -26,12 +26,11 @@ vec3 cj_safe_normalize(vec3 v) {
 
 // geometry.refraction_k: refract's k = 1 - eta^2 (1 - cos^2) = cos_t^2 (seed 002 eq. 3.1),
 // regrouped as (1 - eta)(1 + eta) + (eta cos)^2, free of both cancellations; from |eta| = 16
-// (above every physical ratio) 1 - (eta sin)^2, whose squares neither cancel nor overflow
-// to NaN (inf - inf had made eta = 1e30 a transmitted ray).
+// (above every physical ratio) 1 - eta (eta sin^2), sin^2 = (1 - cos)(1 + cos), which
+// neither cancels nor overflows to NaN (inf - inf had made eta = 1e30 a transmitted ray).
 float cj_refraction_k(float cos_i, float eta) {
     if (abs(eta) < 16.0) return (1.0 - eta) * (1.0 + eta) + (eta * cos_i) * (eta * cos_i);
-    float s = eta * cj_safe_sqrt((1.0 - cos_i) * (1.0 + cos_i));
-    return 1.0 - s * s;
+    return 1.0 - eta * (eta * ((1.0 - cos_i) * (1.0 + cos_i)));
 }
 
 // GLSL refract semantics (MATH.md §1; seed 002 eq. 3.1-3.2), with the Python kernel's
@@ -166,8 +165,8 @@ vec2 cj_conic_tangent(float coef[6], vec2 ab) {
 // sqrt(disc)) / 2, roots q / q2 and q0 / q; linear, tangent and all-zero cases masked.
 void cj_solve_quadratic(float q2, float q1, float q0, out vec2 roots, out bvec2 valid) {
     float scale = max(max(abs(q2), abs(q1)), abs(q0));
-    // frexp of inf or NaN is undefined: such coefficients have no roots (the kernel's
-    // division by an infinite scale gives NaN, never valid)
+    // a coefficient not finite: no roots (conic.solve_quadratic; frexp of inf or NaN is
+    // undefined in GLSL, and GLSL's max of a NaN is either operand)
     bool nonzero = scale > 0.0 && !isinf(scale) && !isnan(q2 + q1 + q0);
     int e;
     frexp(nonzero ? scale : 1.0, e);
