@@ -6,8 +6,10 @@ Skips, saying what is missing, where glslangValidator, a C compiler, the Vulkan 
 and loader or a Vulkan device are absent (`.ci/run` installs them on Debian).
 """
 
+import json
 import shutil
 
+import numpy as np
 import pytest
 
 from caustics_jax import export as ex
@@ -163,3 +165,54 @@ def test_scene_table_lists_every_scene(scenes):
     reports = [sc.run_scene(data, s, work, host=host, spv=spv) for s in ("flat_pool", "no_crossing")]
     table = sc.format_scene_table(reports)
     assert "| flat_pool |" in table and "| no_crossing |" in table
+
+
+# Non-finite inputs (a record cannot carry them in an export: a NaN reference has no
+# tolerance); the kernel's jitted reference is finite for each, and the port must match it.
+NAN, INF = float("nan"), float("inf")
+NON_FINITE = {
+    "refract": [("I", 0, NAN), ("N", 1, NAN), ("eta", None, NAN), ("eta", None, INF)],  # cj_refract: NaN k -> 0
+    "fresnel": [("cos_i", None, NAN)],  # clamp(NaN) is undefined in GLSL; the kernel gives R = 1
+    "edge_intersections": [("coef", 0, INF), ("coef", 0, -INF), ("coef", 4, NAN)],  # no roots
+    "signed_sine": [("P", 0, INF), ("L", 2, -INF)],  # cj_path_vectors: an infinite length is degenerate
+}
+
+
+@pytest.mark.parametrize("kernel", list(NON_FINITE))
+def test_a_port_masks_non_finite_inputs_as_its_kernel(device, tmp_path, kernel):
+    """The hostile-input probe of 2026-11-30 found these ports answering NaN, a root, status
+    OK or R = 0.047 where the kernel masks the lane; the records reuse a clean export's
+    tolerances, with inputs made non-finite and the reference recomputed (jitted, float64,
+    as `export_kernel` computes it)."""
+    import jax
+
+    import caustics_jax as cj
+    from caustics_jax.export.records import pack_records
+
+    _, work, host = device
+    spec = ex.KERNELS[kernel]
+    manifest, raw = ex.export_kernel(spec, 8, 3)
+    clean = ex.read_records(manifest, raw)
+    rows = {k: [] for k in clean}
+    for field, index, value in NON_FINITE[kernel]:
+        for r in range(4):  # four ordinary records, each with one input made non-finite
+            for k, v in clean.items():
+                rows[k].append(v[r].copy())
+            x = rows[field][-1]
+            if index is None:
+                rows[field][-1] = np.asarray(value, x.dtype)
+            else:
+                x.reshape(-1)[index] = value
+    values = {k: np.stack(v) for k, v in rows.items()}
+    with cj.precision("float64"):
+        args = {f.name: jax.numpy.asarray(values[f.name], jax.numpy.float64) for f in spec.inputs()}
+        ref = {k: np.asarray(v) for k, v in jax.jit(spec.evaluate)(args).items()}
+    for name, v in ref.items():
+        assert np.all(np.isfinite(v)), (kernel, name, v)  # the kernel masks these lanes
+        values[name] = v
+    count = len(values["case_tag"])
+    hostile = {**manifest, "count": count}
+    (tmp_path / f"{kernel}.json").write_text(json.dumps(hostile))
+    (tmp_path / f"{kernel}.bin").write_bytes(pack_records(spec, values))
+    report = conf.run_kernel(tmp_path, kernel, work, host=host)
+    assert report["pass_rate"] == 1.0, (kernel, report["fields"], report["failures"][:10])
