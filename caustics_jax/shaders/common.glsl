@@ -167,7 +167,7 @@ void cj_solve_quadratic(float q2, float q1, float q0, out vec2 roots, out bvec2 
     float scale = max(max(abs(q2), abs(q1)), abs(q0));
     // a coefficient not finite: no roots (conic.solve_quadratic; frexp of inf or NaN is
     // undefined in GLSL, and GLSL's max of a NaN is either operand)
-    bool nonzero = scale > 0.0 && !isinf(scale) && !isnan(q2 + q1 + q0);
+    bool nonzero = cj_finite_positive(scale) && !isnan(q2 + q1 + q0);
     int e;
     frexp(nonzero ? scale : 1.0, e);
     float a = ldexp(q2, -e), b = ldexp(q1, -e), c = ldexp(q0, -e);
