@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from caustics_jax import SurfaceMesh, scenes, solve
 from caustics_jax.solvers import Solution, Status, default_tol
-from caustics_jax.testing import planted_mesh_paths, planted_paths, refraction_angle_error
+from caustics_jax.testing import assert_same_lanes, planted_mesh_paths, planted_paths, refraction_angle_error
 
 DTYPES = ["float32", "float64"]
 N_PATHS = 512
@@ -108,8 +108,7 @@ def test_ellipse_inside_the_first_triangle_is_solved():
     # The pool scheduler samples the ellipse only for these lanes (`lanes.map_where`); the
     # chunked one for every lane: the same lanes either way.
     chunked = solve(mesh, P, L, scheduler="chunked")
-    for name in ("status", "point", "iterations", "crossed"):
-        np.testing.assert_array_equal(np.asarray(getattr(sol, name)), np.asarray(getattr(chunked, name)))
+    assert_same_lanes(sol, chunked, ("status", "point", "iterations", "crossed"))
 
 
 def test_terminal_statuses_are_named_and_explained():
@@ -197,8 +196,7 @@ def test_walk_turns_back_when_the_first_direction_fails():
     # Turn-backs, TIR-onset searches and lanes that refine, walk again and refine: the slot
     # pools (one per branch) give the lanes of the chunked scheduler.
     chunked = solve(sc.surface, P, L, scheduler="chunked")
-    for name in ("status", "point", "iterations", "crossed"):
-        np.testing.assert_array_equal(np.asarray(getattr(sol, name)), np.asarray(getattr(chunked, name)))
+    assert_same_lanes(sol, chunked, ("status", "point", "iterations", "crossed"))
 
 
 @pytest.mark.parametrize("depth", [0.1, 0.01])

@@ -35,8 +35,9 @@ so a step computes only the branch its lane needs. `"chunked"` is the
 previous scheduler (every lane computes the ellipse samples; fixed chunks of 256 lanes,
 each until its slowest lane), kept for comparison. Both apply the same per-lane functions
 (`_first_triangle` and `_start_states`, which `walk_init` composes; `walk_step` and
-`walk_turn_back`, which `walk_advance` composes), so statuses, points and iteration counts
-are the same (`tests/test_scheduling.py`). The pool runs each pair in two stages, with the
+`walk_turn_back`, which `walk_advance` composes), so statuses and iteration counts
+are the same and points equal up to the rounding of each program's vector code
+(`tests/test_scheduling.py`, `testing.assert_same_lanes`). The pool runs each pair in two stages, with the
 first stage's output stored in between (`_Start`; `lanes.run_pools`' `after`): XLA's CPU
 fusion would otherwise recompute the first stage's decisions in the kernel of every state
 field that depends on them, and the generated code of those copies was most of the
