@@ -32,9 +32,8 @@ from .objectives import (
     signed_sine,
     signed_sine_and_status,
 )
-from .prepared import PreparedSurface, prepare
+from .prepared import PreparedSurface, prepare, start_points
 from .solvers import Exhaustive, ExhaustiveSolution, Newton, Solution, Status, Trace, Walk, solve
-from .start_points import start_points
 from .transport import (
     ReceiverGrid,
     autodiff_D,

@@ -1,6 +1,8 @@
 """prepare(mesh): the start-point acceleration is chosen once per mesh, cached, and gives the
 start points of the BVH reference path."""
 
+import importlib
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -232,3 +234,37 @@ def test_far_surfaces_check_their_start_point_inputs_and_moved_grids_do_not_warn
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             assert grid_state(m) == "rounded" and prepare(m).local.mesh.grid is None
+
+
+def test_public_start_points_build_the_structure_once_per_mesh(monkeypatch):
+    """`caustics_jax.start_points` keeps `prepare(mesh)`'s structure: a second call on the
+    same mesh builds nothing on the host (it had rebuilt the jittered mesh's bins on every
+    call, 150 ms at 32k triangles), and gives what a structure built for the call gives. A
+    mesh holding numpy arrays, which can change in place, still builds one per call."""
+    import jax
+
+    import caustics_jax as cj
+    import caustics_jax.prepared as prepared_module
+
+    start_points_module = importlib.import_module("caustics_jax.start_points")  # (cj.start_points: the function)
+    built = []
+    real = start_points_module.build_accel
+    for module in (prepared_module, start_points_module):  # (prepared imports it by name)
+        monkeypatch.setattr(module, "build_accel", lambda mesh: built.append(1) or real(mesh))
+    mesh = jax.device_put(jittered_grid(1000, 0.2, seed=3, dtype=np.float32))
+    P, L = _lanes(mesh, 64, 3)
+    P, L = P.astype(np.float32), L.astype(np.float32)
+    first = cj.start_points(mesh, P, L)
+    again = cj.start_points(mesh, P, L)
+    also = cj.start_points(prepare(mesh), P, L)  # a PreparedSurface is accepted too
+    assert len(built) == 1
+    fresh = start_points(mesh, P, L)  # the module's function: a structure built for this call
+    assert len(built) == 2 and np.asarray(fresh.found).sum() > 32
+    for sp in (first, again, also):
+        for field in ("face", "barycentric", "found"):
+            np.testing.assert_array_equal(np.asarray(getattr(sp, field)), np.asarray(getattr(fresh, field)))
+    numpy_mesh = jax.device_get(mesh)
+    built.clear()
+    cj.start_points(numpy_mesh, P, L)
+    cj.start_points(numpy_mesh, P, L)
+    assert len(built) == 2

@@ -37,7 +37,7 @@ from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
 from ..prepared import PreparedSurface, prepare
 from ..progress import progress as progress_bar
-from ..start_points import build_bvh, first_crossing
+from ..start_points import first_crossing
 
 #: Largest `n_photons` of one `photon_irradiance` call: 2^32 photons are hours of tracing on
 #: a CPU (the experiments use up to 2^26); a larger count is a typo, refused rather than
@@ -275,7 +275,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     L_np = prep.to_local(L_np)
     plane = EmissionPlane.covering(mesh, L_np)
     x0, y0 = receiver.x0 - origin[0], receiver.y0 - origin[1]
-    bvh = None if mesh.grid is not None else build_bvh(mesh)
+    bvh = None if mesh.grid is not None else prep.local.bvh  # built once per mesh (`prepare`)
     n_chunks = -(-n_photons // chunk)
     total = n_chunks * chunk
     key = jax.random.PRNGKey(seed)
