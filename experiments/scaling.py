@@ -1,13 +1,16 @@
 # %% [markdown]
 # # Scaling with tessellation (seed 001 Fig. 10-12 analogue)
 #
-# How do the curve walk and the best optimistix Newton configuration of
-# `caustics_jax/compare.py` (`newton-hv`: Newton, half-vector constraint) scale with the
-# triangle count of the water surface? The wavy pool (same waves, same light, same 4096
+# How do the curve walk and the optimistix Newton baselines of `caustics_jax/compare.py`
+# scale with the triangle count of the water surface? Newton converging inside every
+# triangle (`newton-hv`: Newton, half-vector constraint) and Newton stepping as Cycles'
+# MNEE and Mitsuba's SMS do (`newton-hv-step`: one step, then re-project onto the
+# surface; the strongest baseline, docs/solvers.md "Throughput"). The wavy pool (same waves, same light, same 4096
 # floor receivers) is tessellated from about 4k to 1M triangles; per size and dtype we
 # measure the time per solve (start points given, median of `REPEATS` calls after a
 # compile call), the start points' own time, the mean number of triangles crossed, and
-# the found fraction. Newton runs with its default cap of 64 patches (one triangle per
+# the found fraction, and the solver's steps per found path (the walk: crossings plus
+# refinement cuts; Newton: its iterations). Newton runs with its default cap of 64 patches (one triangle per
 # patch) and with 4096, to separate its cost growth from the cap. A least-squares line in
 # log-log space gives the growth law `time ~ F^slope`.
 #
@@ -42,7 +45,9 @@ SOLVERS = {
     "walk": ("walk", {}),
     "newton-hv": CONFIGS["newton-hv"],
     "newton-hv, 4096 patches": (CONFIGS["newton-hv"][0], {**CONFIGS["newton-hv"][1], "max_patches": 4096}),
+    "newton-hv-step": CONFIGS["newton-hv-step"],
 }
+COLORS = {"walk": "C0", "newton-hv": "C1", "newton-hv, 4096 patches": "C3", "newton-hv-step": "C2"}
 DTYPES = ("float32", "float64")
 # The general solver path, not a scene-feature specialisation (issue 7 part 2, where present).
 GENERAL = {"features": None} if "features" in inspect.signature(cj.solve).parameters else {}
@@ -103,8 +108,13 @@ def fits(rows) -> list[dict]:
             F = [r["triangles"] for r in rs]
             s_t, c_t = _slope(F, [r["us_per_solve"] for r in rs])
             s_c, c_c = _slope(F, [max(r["crossed_mean_found"] or 0, 1e-3) for r in rs])
+            s_i, _ = _slope(F, [r["iterations_mean_found"] for r in rs])
+            # time per solve affine in the crossings: t = fixed + per_crossing x crossed
+            per_crossing, fixed = np.polyfit([r["crossed_mean_found"] or 0 for r in rs],
+                                             [r["us_per_solve"] for r in rs], 1)
             out.append({"dtype": dtype, "solver": name, "time_slope": s_t, "time_coef_us": c_t,
-                        "crossed_slope": s_c, "crossed_coef": c_c})
+                        "crossed_slope": s_c, "crossed_coef": c_c, "iterations_slope": s_i,
+                        "fixed_us": float(fixed), "us_per_crossing": float(per_crossing)})
         rs = sorted((r for r in rows if r["dtype"] == dtype and r["solver"] == "walk"), key=lambda r: r["triangles"])
         if len(rs) >= 2:
             s, c = _slope([r["triangles"] for r in rs], [r["start_us_per_lane"] for r in rs])
@@ -114,8 +124,8 @@ def fits(rows) -> list[dict]:
 
 def plot(result, path):
     rows = result["rows"]
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
-    colors = {"walk": "C0", "newton-hv": "C1", "newton-hv, 4096 patches": "C3"}
+    fig, axes = plt.subplots(1, 3, figsize=(19, 5.5))
+    colors = COLORS
     slopes = {(f["dtype"], f["solver"]): f for f in result["fits"]}
     for dtype, ls, marker in (("float32", "-", "o"), ("float64", "--", "s")):
         for name, color in colors.items():
@@ -131,6 +141,8 @@ def plot(result, path):
             big = dict(markersize=10, markerfacecolor="none") if name == "walk" else {}
             axes[1].plot(F, [r["crossed_mean_found"] for r in rs], ls=ls, marker=marker, color=color,
                          label=f"{name} {dtype} (slope {fit.get('crossed_slope', float('nan')):.2f})", **big)
+            axes[2].plot(F, [r["iterations_mean_found"] for r in rs], ls=ls, marker=marker, color=color,
+                         label=f"{name} {dtype} (slope {fit.get('iterations_slope', float('nan')):.2f})")
         rs = sorted((r for r in rows if r["dtype"] == dtype and r["solver"] == "walk"), key=lambda r: r["triangles"])
         if rs:
             fit = slopes.get((dtype, "start points (grid DDA)"), {})
@@ -145,12 +157,19 @@ def plot(result, path):
         ax.set_xlabel("triangles F of the wavy pool")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
+    # room under the curves for the legend (it had covered the start points' curves)
+    lo = min(r["start_us_per_lane"] for r in rows)
+    axes[0].set_ylim(bottom=lo / 20)
+    axes[0].legend(fontsize=7, loc="lower right")
     axes[0].set_ylabel("time per solve (microseconds, 2-core CPU, start points given)")
     axes[0].set_title("Per-solve time against tessellation")
     axes[1].set_ylabel("mean triangles crossed per found path")
     axes[1].set_title("Triangles crossed from M0 to the solution")
-    fig.suptitle(f"Walk vs optimistix Newton (half-vector) on the wavy pool, same {result['lanes']} receivers "
-                 "and light at every tessellation (log-log; slope = fitted growth exponent)", fontsize=10)
+    axes[2].set_ylabel("mean solver steps per found path (walk: crossings + cuts)")
+    axes[2].set_title("Steps from M0 to the solution")
+    fig.suptitle(f"Walk vs optimistix Newton (half-vector; converging per triangle, and one step + re-projection) "
+                 f"on the wavy pool, same {result['lanes']} receivers and light at every tessellation "
+                 "(log-log; slope = fitted growth exponent)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -169,12 +188,16 @@ def main(argv=None):
     write_json(out / "scaling.json", result)
     plot(result, out / "scaling.png")
     print(f"{'triangles':>10s} {'dtype':8s} {'solver':24s} {'us/solve':>9s} {'start us':>9s} {'found':>7s} "
-          f"{'crossed':>8s}")
+          f"{'crossed':>8s} {'steps':>6s}")
     for r in result["rows"]:
         print(f"{r['triangles']:>10,} {r['dtype']:8s} {r['solver']:24s} {r['us_per_solve']:9.2f} "
-              f"{r['start_us_per_lane']:9.2f} {r['found']:7.4f} {r['crossed_mean_found'] or 0:8.2f}")
+              f"{r['start_us_per_lane']:9.2f} {r['found']:7.4f} {r['crossed_mean_found'] or 0:8.2f} "
+              f"{r['iterations_mean_found']:6.2f}")
     for f in result["fits"]:
-        extra = f", crossed ~ F^{f['crossed_slope']:.2f}" if "crossed_slope" in f else ""
+        extra = ""
+        if "crossed_slope" in f:
+            extra = (f", crossed ~ F^{f['crossed_slope']:.2f}, steps ~ F^{f['iterations_slope']:.2f}, "
+                     f"t = {f['fixed_us']:.1f} us + {f['us_per_crossing']:.2f} us x crossed")
         print(f"{f['dtype']} {f['solver']}: time ~ F^{f['time_slope']:.2f}{extra}")
     print(f"{result['seconds']:.0f} s")
 
