@@ -192,6 +192,15 @@ def cacheable(mesh: SurfaceMesh) -> bool:
     return not any(isinstance(x, np.ndarray) for x in jax.tree.leaves(mesh))
 
 
+def kept_accel(mesh: SurfaceMesh) -> Accel | None:
+    """`prepare(mesh).accel` (built once per mesh object and kept) for a concrete mesh
+    holding JAX arrays; None for a traced mesh or one holding numpy arrays, for which the
+    caller builds a structure per call (`start_points.first_crossing` does)."""
+    if isinstance(mesh.vertices, jax.core.Tracer) or not cacheable(mesh):
+        return None
+    return prepare(mesh).accel
+
+
 def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "auto", bvh: FaceBVH | None = None,
                  accel: Accel | None = None) -> StartPoint:  # fmt: skip
     """`caustics_jax.start_points`: `start_points.start_points` (same arguments, checks and

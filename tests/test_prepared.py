@@ -237,7 +237,7 @@ def test_far_surfaces_check_their_start_point_inputs_and_moved_grids_do_not_warn
 
 
 def test_public_start_points_build_the_structure_once_per_mesh(monkeypatch):
-    """`caustics_jax.start_points` keeps `prepare(mesh)`'s structure: a second call on the
+    """`caustics_jax.start_points` (and `transport.surface_hits`) keep `prepare(mesh)`'s structure: a second call on the
     same mesh builds nothing on the host (it had rebuilt the jittered mesh's bins on every
     call, 150 ms at 32k triangles), and gives what a structure built for the call gives. A
     mesh holding numpy arrays, which can change in place, still builds one per call."""
@@ -257,7 +257,9 @@ def test_public_start_points_build_the_structure_once_per_mesh(monkeypatch):
     first = cj.start_points(mesh, P, L)
     again = cj.start_points(mesh, P, L)
     also = cj.start_points(prepare(mesh), P, L)  # a PreparedSurface is accepted too
+    hits = [cj.transport.surface_hits(mesh, L[0], P) for _ in range(2)]  # (it had binned the faces per call)
     assert len(built) == 1
+    assert 8 < np.asarray(hits[0][2]).sum() and np.array_equal(np.asarray(hits[0][0]), np.asarray(hits[1][0]))
     fresh = start_points(mesh, P, L)  # the module's function: a structure built for this call
     assert len(built) == 2 and np.asarray(fresh.found).sum() > 32
     for sp in (first, again, also):

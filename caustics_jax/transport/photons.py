@@ -35,7 +35,7 @@ from ..arguments import check_eta, check_fits, check_int, check_points, check_re
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
 from ..mesh import SurfaceMesh
-from ..prepared import PreparedSurface, prepare
+from ..prepared import PreparedSurface, kept_accel, prepare
 from ..progress import progress as progress_bar
 from ..start_points import first_crossing
 
@@ -185,7 +185,9 @@ def surface_hits(mesh: SurfaceMesh, L, X, *, bvh=None):
     s_far = (L[..., 2] - z_lo + (z_hi - z_lo) + 1) / jnp.maximum(-d[..., 2], jnp.finfo(d.dtype).tiny)
     end = L + s_far[..., None] * d
     L_b = jnp.broadcast_to(L, end.shape)
-    return first_crossing(mesh, L_b, end, bvh=bvh)
+    # The structure `prepare` keeps for this mesh (it had binned a 65k-triangle mesh's
+    # faces on every call: 180 ms for 64 rays).
+    return first_crossing(mesh, L_b, end, bvh=bvh, accel=None if bvh is not None else kept_accel(mesh))
 
 
 def refract_into_medium(d, n_s, eta):
