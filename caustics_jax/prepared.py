@@ -1,6 +1,6 @@
 """A surface prepared once for many solves: padded arrays, bounds, static features and the
 start-point acceleration structure (DESIGN.md "Skipping what a scene does not need": the
-analysis runs once per scene, outside jit).
+analysis runs once per scene, eagerly, even when first asked for inside a user's jit).
 
 `prepare(mesh)` does the host analysis a solve needs and caches it per mesh object, so
 repeated `solve` / `irradiance` calls on the same mesh do no host analysis at all:
@@ -21,6 +21,9 @@ repeated `solve` / `irradiance` calls on the same mesh do no host analysis at al
   solved near it, so float32 keeps the digits its triangles need.
 
 `solve` and `irradiance` accept a `PreparedSurface` wherever they accept a `SurfaceMesh`.
+`start_points` here is the package's `caustics_jax.start_points`: the module function of
+`caustics_jax.start_points` with the structure kept per mesh (`kept_accel`, which
+`transport.surface_hits` uses too, for meshes `cacheable` holds).
 The cache holds a weak reference to the mesh: a prepared surface lives as long as its mesh.
 A mesh changed with `eqx.tree_at` (animated water) is a new object and is prepared anew.
 """
@@ -106,7 +109,8 @@ class PreparedSurface:
         if not np.any(self._a.origin) and self._a.grid in ("none", "exact"):
             return self
         if self._a.local is None:
-            self._a.local = _cached(local_mesh(self.mesh, self._a.origin))
+            with jax.ensure_compile_time_eval():  # (see `_cached`)
+                self._a.local = _cached(local_mesh(self.mesh, self._a.origin))
         return self._a.local
 
     def to_local(self, X) -> np.ndarray:
@@ -118,14 +122,17 @@ class PreparedSurface:
         """The start-point acceleration structure (`build_accel`: the grid's cells only
         where they fit the vertices, `frames.grid_state`), built on first use."""
         if self._a.accel is None:
-            self._a.accel = build_accel(self.mesh)
+            with jax.ensure_compile_time_eval():  # (see `_cached`)
+                self._a.accel = build_accel(self.mesh)
         return self._a.accel
 
     @property
     def bvh(self) -> FaceBVH:
         """The general (reference) path's BVH, built on first use (`accel` is faster)."""
         if self._a.bvh is None:
-            self._a.bvh = self.accel if isinstance(self.accel, FaceBVH) else build_bvh(self.mesh)
+            accel = self._a.accel  # (not built for this: a binned or grid structure is no BVH)
+            with jax.ensure_compile_time_eval():  # (see `_cached`)
+                self._a.bvh = accel if isinstance(accel, FaceBVH) else build_bvh(self.mesh)
         return self._a.bvh
 
     def with_accel(self, accel: Accel) -> PreparedSurface:
@@ -181,8 +188,9 @@ def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
         # numpy arrays (jax.device_get(mesh), eqx.tree_at with one) can change in place: a
         # cached analysis would go stale (a pool moved in place had found no start point), so
         # such a mesh is copied to JAX arrays and analysed on every call, never cached.
-        copied: SurfaceMesh = jax.tree.map(jnp.asarray, mesh)
-        return PreparedSurface(copied, _Analysis(copied))
+        with jax.ensure_compile_time_eval():
+            copied: SurfaceMesh = jax.tree.map(jnp.asarray, mesh)
+            return PreparedSurface(copied, _Analysis(copied))
     return _cached(mesh)
 
 
@@ -215,7 +223,13 @@ def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "au
     jittered mesh (binned faces) 150-158 ms per call before, 7-11 ms kept; the
     1,001,112-triangle wavy pool (grid cells, checked against the vertices and copied to
     the device on every call before) 110 -> 60 ms, the rest being the per-call work on
-    the traced heights (`face_cells.first_hit_cells`)."""
+    the traced heights (`face_cells.first_hit_cells`).
+
+    What the first call on a mesh does is `prepare(mesh)`'s (kept as long as the mesh
+    lives): the padded copy, the features, a local copy for a mesh far from the origin;
+    it checks the arrays (`mesh.check_arrays()`: NaN vertices are a `ValueError`) and
+    warns once about a grid its vertices left. Inside a user's `jit` the analysis is still
+    computed eagerly (`jax.ensure_compile_time_eval`)."""
     if isinstance(mesh, PreparedSurface):
         if method == "auto" and bvh is None and accel is None:
             return mesh.start_points(P, L)
@@ -229,6 +243,9 @@ def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "au
 def _cached(mesh: SurfaceMesh) -> PreparedSurface:
     """`mesh` analysed and entered in the cache (a `local` mesh too, so that `prepare` of
     it, e.g. by the visibility test, finds the same analysis)."""
-    key, analysis = id(mesh), _Analysis(mesh)
+    # Computed eagerly even when the first use is inside a user's `jit` (`start_points` of a
+    # mesh closed over): traced arrays kept here would leak into every later call.
+    with jax.ensure_compile_time_eval():
+        key, analysis = id(mesh), _Analysis(mesh)
     _CACHE[key] = (weakref.ref(mesh, lambda _, key=key, cache=_CACHE: cache.pop(key, None)), analysis)
     return PreparedSurface(mesh, analysis)

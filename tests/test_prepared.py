@@ -270,3 +270,47 @@ def test_public_start_points_build_the_structure_once_per_mesh(monkeypatch):
     cj.start_points(numpy_mesh, P, L)
     cj.start_points(numpy_mesh, P, L)
     assert len(built) == 2
+
+
+def test_public_start_points_first_called_inside_jit_keep_no_tracers():
+    """A mesh closed over by a user's `jit`: the first `caustics_jax.start_points` (and
+    `surface_hits`) call prepares it inside the trace. The kept analysis is computed
+    eagerly, so later calls outside `jit` work (traced arrays kept in the cache would
+    leak into them)."""
+    import jax
+
+    import caustics_jax as cj
+
+    mesh = jax.device_put(jittered_grid(1000, 0.2, seed=4, dtype=np.float32))
+    P, L = (x.astype(np.float32) for x in _lanes(mesh, 32, 4))
+    inside = jax.jit(lambda P, L: cj.start_points(mesh, P, L))(P, L)
+    hits = jax.jit(lambda X: cj.transport.surface_hits(mesh, L[0], X))(P)
+    prep = prepare(mesh)
+    leaves = jax.tree.leaves((prep.accel, prep.padded, prep.bvh))
+    assert leaves and not any(isinstance(x, jax.core.Tracer) for x in leaves)
+    outside = cj.start_points(mesh, P, L)
+    for field in ("face", "barycentric", "found"):
+        np.testing.assert_array_equal(np.asarray(getattr(inside, field)), np.asarray(getattr(outside, field)))
+    np.testing.assert_array_equal(np.asarray(hits[0]), np.asarray(cj.transport.surface_hits(mesh, L[0], P)[0]))
+    assert np.asarray(cj.solve(mesh, P, L).found).any()
+
+
+def test_public_start_points_route_by_method_and_frame():
+    """A `PreparedSurface` with another method runs on its mesh (the BVH here); a mesh far
+    from the origin is searched about its centre, as `prepare(mesh).start_points` does."""
+    import caustics_jax as cj
+
+    mesh = jittered_grid(1000, 0.2, seed=5, dtype=np.float32)
+    P, L = (x.astype(np.float32) for x in _lanes(mesh, 64, 5))
+    general = cj.start_points(prepare(mesh), P, L, method="general")
+    want = start_points(mesh, P, L, method="general")
+    for field in ("face", "barycentric", "found"):
+        np.testing.assert_array_equal(np.asarray(getattr(general, field)), np.asarray(getattr(want, field)))
+    shift = np.array([300.0, -200.0, 0.0], np.float32)
+    far = mesh.translated(shift)
+    prep = prepare(far)
+    assert np.any(prep.origin)
+    got, kept = cj.start_points(far, P + shift, L + shift), prep.start_points(P + shift, L + shift)
+    for field in ("face", "barycentric", "found"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, field)), np.asarray(getattr(kept, field)))
+    assert np.asarray(got.found).sum() > 16
