@@ -275,8 +275,14 @@ def test_assert_same_lanes_tolerates_rounding_only():
     a = SimpleNamespace(status=np.array([0, 1]), point=point)
     near = SimpleNamespace(status=np.array([0, 1]), point=point + [[0.0, 900 * 10 * eps, 0.0], [0.0, 0.0, 10 * eps]])
     assert_same_lanes(a, near, ("status", "point"))
+    both_nan = SimpleNamespace(status=a.status, point=point + [[np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert_same_lanes(both_nan, both_nan, ("status", "point"))
+    empty = SimpleNamespace(status=np.zeros(0), point=np.zeros((0, 3)))
+    assert_same_lanes(empty, empty, ("status", "point"))
     for far in (SimpleNamespace(status=np.array([0, 2]), point=point),
                 SimpleNamespace(status=a.status, point=point + [[0.0, 0.0, 0.0], [100 * eps, 0.0, 0.0]]),
-                SimpleNamespace(status=a.status, point=point + [[1e-9, 0.0, 0.0], [0.0, 0.0, 0.0]])):
+                SimpleNamespace(status=a.status, point=point + [[1e-9, 0.0, 0.0], [0.0, 0.0, 0.0]]),
+                SimpleNamespace(status=a.status, point=point + [[np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]]),
+                SimpleNamespace(status=a.status, point=point + [[np.inf, 0.0, 0.0], [0.0, 0.0, 0.0]])):
         with pytest.raises(AssertionError):
             assert_same_lanes(a, far, ("status", "point"))
