@@ -44,7 +44,7 @@ from .frames import grid_state, local_mesh, local_origin
 from .lanes import padded_mesh
 from .mesh import SurfaceMesh
 from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, check_segments
-from .start_points import start_points as _start_points_of_mesh  # (this module's `start_points` wraps it)
+from .start_points import start_points as start_points_on_mesh  # (this module's `start_points` wraps it)
 
 
 class _Analysis:
@@ -157,7 +157,7 @@ class PreparedSurface:
             P, L = check_segments(self.mesh, P, L)
             shift = jnp.asarray(self._a.origin, self.dtype)
             return local.start_points(P - shift, L - shift)
-        return _start_points_of_mesh(self.mesh, P, L, accel=self.accel)
+        return start_points_on_mesh(self.mesh, P, L, accel=self.accel)
 
     def may_cross(self, P: np.ndarray, L: np.ndarray) -> np.ndarray:
         """`(N,)` False where the segment's bounding box misses the surface's: those lanes
@@ -237,7 +237,7 @@ def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "au
     elif (method == "auto" and bvh is None and accel is None and isinstance(mesh, SurfaceMesh)
           and not isinstance(mesh.vertices, jax.core.Tracer) and cacheable(mesh)):
         return prepare(mesh).start_points(P, L)
-    return _start_points_of_mesh(mesh, P, L, method=method, bvh=bvh, accel=accel)
+    return start_points_on_mesh(mesh, P, L, method=method, bvh=bvh, accel=accel)
 
 
 def _cached(mesh: SurfaceMesh) -> PreparedSurface:
