@@ -133,9 +133,9 @@ def pool_slots(platform: str | None = None) -> int:
     """Lanes in flight per device in `run_pool` (env `CAUSTICS_JAX_POOL_SLOTS`).
 
     CPU: 256, the chunk width of `map_lanes`, so both schedulers run the same vmapped
-    step and give the same results (bit-identical in the tests on AVX2 machines; lanes that
-    `map_where` compacts may round differently, `testing.assert_same_lanes`; XLA CPU
-    vectorises wider steps differently:
+    step and give the same results (the 4096 lanes of `tests/test_scheduling.py` bit-identical,
+    also on an AVX-512 CPU; lanes that `map_where` compacts may round differently by a few
+    eps, `testing.assert_same_lanes`; XLA CPU vectorises wider steps differently:
     1024 slots moved float32 points by up to 1.5e-4 of a barycentric unit, and ran
     slower). GPU: 512 lanes per streaming multiprocessor (`core_count`; 65536 when the
     backend does not report it), enough resident lanes to hide memory latency; TPU: 8192.

@@ -195,18 +195,16 @@ def prepare(mesh: SurfaceMesh | PreparedSurface) -> PreparedSurface:
 
 
 def cacheable(mesh: SurfaceMesh) -> bool:
-    """Whether `prepare` keeps `mesh`'s analysis: its arrays are JAX arrays (immutable), not
-    numpy arrays, which can change in place."""
-    return not any(isinstance(x, np.ndarray) for x in jax.tree.leaves(mesh))
+    """Whether `prepare` keeps `mesh`'s analysis: its arrays are concrete JAX arrays
+    (immutable), not numpy arrays, which can change in place, nor traced ones."""
+    return not any(isinstance(x, np.ndarray | jax.core.Tracer) for x in jax.tree.leaves(mesh))
 
 
 def kept_accel(mesh: SurfaceMesh) -> Accel | None:
     """`prepare(mesh).accel` (built once per mesh object and kept) for a concrete mesh
     holding JAX arrays; None for a traced mesh or one holding numpy arrays, for which the
     caller builds a structure per call (`start_points.first_crossing` does)."""
-    if isinstance(mesh.vertices, jax.core.Tracer) or not cacheable(mesh):
-        return None
-    return prepare(mesh).accel
+    return prepare(mesh).accel if cacheable(mesh) else None
 
 
 def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "auto", bvh: FaceBVH | None = None,
@@ -234,8 +232,7 @@ def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "au
         if method == "auto" and bvh is None and accel is None:
             return mesh.start_points(P, L)
         mesh = mesh.mesh
-    elif (method == "auto" and bvh is None and accel is None and isinstance(mesh, SurfaceMesh)
-          and not isinstance(mesh.vertices, jax.core.Tracer) and cacheable(mesh)):
+    elif method == "auto" and bvh is None and accel is None and isinstance(mesh, SurfaceMesh) and cacheable(mesh):
         return prepare(mesh).start_points(P, L)
     return start_points_on_mesh(mesh, P, L, method=method, bvh=bvh, accel=accel)
 
