@@ -48,6 +48,7 @@ figures: $(STAMP)
 	$(PY) -m experiments.precision_agreement
 	$(PY) -m experiments.exhaustive_cost
 	$(PY) -m experiments.throughput
+	$(PY) -m experiments.compile_options
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 # The GLSL walk on lavapipe (or another Vulkan device) against the JAX walk (docs/export.md).

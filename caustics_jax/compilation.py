@@ -1,4 +1,4 @@
-"""JAX's persistent compilation cache, on by default (DESIGN.md "Performance methodology").
+"""JAX's persistent compilation cache (on by default) and the XLA options of the solver programs.
 
 A solver program takes seconds to compile (docs/solvers.md "Throughput"); the cache keeps
 compiled programs on disk between processes, so a second `caustics-jax compare`, test run
@@ -19,6 +19,10 @@ could read a program another one is still writing (two test workers, two runs st
 together). The cache is trusted code: keep it in a directory only you can write (JAX's warning for
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 
+The solvers' block programs compile with the project's XLA options (`jit`, `XLA_OPTIONS`:
+XLA:CPU's loop emitters, which compile the walk in 7.0-8.2 s, not 10.7-12.8 s);
+`CAUSTICS_JAX_XLA_OPTIONS=default` keeps XLA's own options.
+
 In memory, every compiled program holds about three memory mappings of the process on
 XLA:CPU until JAX drops it; past Linux's `vm.max_map_count` (65,530 by default) XLA dies
 by SIGSEGV or SIGABRT. A process that compiles tens of thousands of programs (the test
@@ -28,8 +32,10 @@ between units of work (docs/solvers.md "Compilation").
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import jax
@@ -106,3 +112,73 @@ def release_compiled_programs(fraction: float = 0.5) -> bool:
     jax.clear_caches()
     gc.collect()
     return True
+
+
+# --------------------------------------------------------------------------- XLA options
+
+#: Environment variable: "default" (or "0", "off", "false", "no") compiles the solver
+#: programs with XLA's default options instead of `XLA_OPTIONS`; read at import
+#: (`options_from_env`).
+XLA_ENV = "CAUSTICS_JAX_XLA_OPTIONS"
+#: XLA options of the solvers' block programs (`jit`): XLA:CPU's loop emitters instead of
+#: its MLIR fusion emitters (`xla_cpu_use_fusion_emitters`, on by default in this JAX).
+#: Measured on the 2-core CPU, cache off, solver programs of the default pool, both option
+#: sets in one process (`experiments/compile_options.py`, docs/solvers.md "Compilation"):
+#: the walk program's XLA compile 7.0-8.2 s instead
+#: of 10.7-12.8 s, one-step Newton's 2.4-3.1 s instead of 3.1-4.2 s and 15-26% faster
+#: calls, the float32 walk as fast, the float64 walk 5-14% slower; statuses identical on
+#: 65,536 lanes. Other backends ignore the option (it is a CPU one).
+XLA_OPTIONS: dict = {"xla_cpu_use_fusion_emitters": False}
+
+
+def options_from_env(value: str | None) -> dict:
+    """The option set `CAUSTICS_JAX_XLA_OPTIONS=value` selects: `XLA_OPTIONS` when unset,
+    empty or "1"/"on"/"project"; `{}` (XLA's defaults) for "default", "0", "off", "false",
+    "no"; anything else is a `ValueError` (a typo must not silently change the programs)."""
+    v = (value or "").strip().lower()
+    if v in ("", "1", "on", "true", "yes", "project"):
+        return dict(XLA_OPTIONS)
+    if v in ("default",) + _OFF:
+        return {}
+    raise ValueError(f"{XLA_ENV} must be 'project' (the default) or 'default' (XLA's own options), got {value!r}")
+
+
+_xla: dict = options_from_env(os.environ.get(XLA_ENV))
+
+
+def xla_options() -> dict:
+    """The XLA options the solver programs are compiled with now (`jit`): `XLA_OPTIONS`,
+    or `{}` (XLA's defaults) when `CAUSTICS_JAX_XLA_OPTIONS=default` or inside
+    `using_xla_options`."""
+    return dict(_xla)
+
+
+@contextlib.contextmanager
+def using_xla_options(options: dict | None) -> Iterator[None]:
+    """Programs built inside use `options` (None or `{}`: XLA's defaults): for comparing
+    compile options in one process (`experiments/compile_options.py`). The solvers' block
+    programs (`lanes.on_devices`) are built per option set; programs already built keep
+    theirs."""
+    global _xla
+    if options is not None and not isinstance(options, dict):
+        raise ValueError(f"options must be a dict of XLA option names to values or None, got {options!r}")
+    saved, _xla = _xla, dict(options or {})
+    try:
+        yield
+    finally:
+        _xla = saved
+
+
+def jit_kwargs() -> dict:
+    """`jax.jit`'s keyword arguments for the project's XLA options (`xla_options()`):
+    `{"compiler_options": ...}`, or `{}` for XLA's defaults."""
+    return {"compiler_options": xla_options()} if _xla else {}
+
+
+def jit(fun, **kwargs):
+    """`jax.jit` with the project's XLA options (`jit_kwargs()`, read when `jit` runs), for
+    top-level programs only: JAX refuses `compiler_options` on a jitted function called
+    inside another trace (a kernel inside a user's `jit`), so the package's kernels and
+    decorated functions keep XLA's defaults and only the solvers' block programs
+    (`lanes.on_devices`) take these options."""
+    return jax.jit(fun, **jit_kwargs(), **kwargs)

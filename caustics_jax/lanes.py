@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from .compilation import jit, xla_options
 from .mesh import SurfaceMesh
 
 #: Lanes per vmapped chunk of `map_lanes` (env `CAUSTICS_JAX_LANE_CHUNK`).
@@ -408,15 +409,16 @@ def lanes_per_block() -> int:
 
 
 @functools.cache
-def _compiled(fn, static, n_shared: int, n_lanes: int, devices: tuple, spmd: bool):
+def _compiled(fn, static, n_shared: int, n_lanes: int, devices: tuple, spmd: bool, options: tuple):
+    # `options`: the XLA options in force (`compilation.xla_options()`), part of the key.
     def program(*args):
         return fn(*args, static)
 
     if len(devices) == 1 or not spmd:
-        return jax.jit(program)
+        return jit(program)
     specs = (PartitionSpec(),) * n_shared + (PartitionSpec("lanes"),) * n_lanes
-    return jax.jit(jax.shard_map(program, mesh=lane_mesh(devices), in_specs=specs,
-                                 out_specs=PartitionSpec("lanes"), check_vma=False))
+    return jit(jax.shard_map(program, mesh=lane_mesh(devices), in_specs=specs,
+                             out_specs=PartitionSpec("lanes"), check_vma=False))
 
 
 def on_devices(fn, static, shared: tuple, lanes: tuple, *, spmd: bool = True):
@@ -434,7 +436,7 @@ def on_devices(fn, static, shared: tuple, lanes: tuple, *, spmd: bool = True):
     multiple of the device count (`run_blocks` makes it so).
     """
     devices = tuple(jax.local_devices())
-    program = _compiled(fn, static, len(shared), len(lanes), devices, spmd)
+    program = _compiled(fn, static, len(shared), len(lanes), devices, spmd, tuple(sorted(xla_options().items())))
     if len(devices) == 1 or spmd:
         return program(*shared, *lanes)
     sharding = NamedSharding(lane_mesh(devices), PartitionSpec("lanes"))

@@ -247,6 +247,46 @@ def test_compilation_cache_directory_from_the_environment(value, expected, monke
         assert (None if got is None else str(got)) == expected
 
 
+@pytest.mark.parametrize("value, project", [(None, True), ("", True), ("project", True), ("1", True),
+                                            ("default", False), ("Off", False), ("0", False)])
+def test_xla_options_from_the_environment(value, project):
+    got = compilation.options_from_env(value)
+    assert got == (compilation.XLA_OPTIONS if project else {})
+    assert got is not compilation.XLA_OPTIONS  # a copy: nothing can edit the defaults through it
+
+
+def test_a_misspelt_xla_options_setting_is_refused():
+    with pytest.raises(ValueError, match="CAUSTICS_JAX_XLA_OPTIONS"):
+        compilation.options_from_env("defualt")
+    with pytest.raises(ValueError, match="dict"):
+        with compilation.using_xla_options("default"):
+            pass
+
+
+def test_the_project_xla_options_reach_every_block_program():
+    """The block programs (`lanes.on_devices`) compile with `compilation.xla_options()`: an
+    option XLA does not know fails their compile, so the options are passed; the project's
+    own options are accepted by the installed XLA and give the results of XLA's defaults;
+    leaving `using_xla_options` restores the options in force."""
+    from caustics_jax.lanes import on_devices
+
+    def block(scale, x, static):
+        return jnp.sin(x) * scale + static
+
+    x = jnp.linspace(0.0, 1.0, 8 * len(jax.local_devices()))
+    before = compilation.xla_options()
+    outs = {}
+    for name, options in (("project", compilation.XLA_OPTIONS), ("xla", {})):
+        with compilation.using_xla_options(options):
+            assert compilation.xla_options() == options
+            outs[name] = np.asarray(on_devices(block, 0.5, (jnp.float32(2.0),), (x,)))
+    np.testing.assert_allclose(outs["project"], outs["xla"], rtol=4 * np.finfo(np.float32).eps)
+    with compilation.using_xla_options({"xla_no_such_option_here": True}):
+        with pytest.raises(Exception, match="xla_no_such_option_here"):
+            on_devices(block, 0.25, (jnp.float32(2.0),), (x,))
+    assert compilation.xla_options() == before
+
+
 @pytest.mark.skipif(compilation.memory_maps() is None, reason="/proc/self/maps: Linux only")
 def test_release_compiled_programs_gives_back_the_memory_mappings():
     """Each compiled program holds memory mappings until JAX drops it (the cause of the

@@ -1,0 +1,165 @@
+# %% [markdown]
+# # XLA options of the solver programs: compile time and speed
+#
+# Question: which XLA options should the project's programs compile with? A first `solve`
+# spends most of its time in XLA:CPU's backend (LLVM code generation of the fused
+# kernels), and XLA has options that trade compile time against run time.
+#
+# In one process, for each dtype and solver, the solver's block program is compiled once
+# with XLA's defaults and once with the project's options (`compilation.XLA_OPTIONS`,
+# `compilation.using_xla_options`); then the calls of both are timed interleaved (the
+# machine's load drifts alike for both). The start-point program is compiled before the
+# first timed call, so a first call is the solver program's trace, compile and one run;
+# "compile" is XLA's backend compile of that call (JAX's
+# `/jax/core/compile/backend_compile_duration` events), which does not depend on which
+# option set is traced first (the second reuses traces of nested functions).
+# Statuses must agree lane for lane, points within float rounding: reported.
+#
+# Persistent compilation cache off (compile times, not cache loads). Run:
+# `python -m experiments.compile_options` (`--quick`: 8192 receivers, 2 repeats).
+# Writes `figures/compile_options.png` and `.json` and prints the table; docs/solvers.md
+# "Compilation" quotes a run.
+
+# %%
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("CAUSTICS_JAX_COMPILATION_CACHE", "0")  # measure compile times, not cache loads
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built explicitly)
+
+import numpy as np  # noqa: E402
+
+from caustics_jax import Newton, Walk, compare, prepare, solve  # noqa: E402
+from caustics_jax.compilation import XLA_OPTIONS, using_xla_options  # noqa: E402
+from experiments.common import figures_dir, log, parse_args, use_agg, write_json  # noqa: E402
+
+CONFIGS = {"walk": Walk(), "newton-hv-step": Newton(stepping="one_step"), "newton-hv": Newton()}
+#: The option sets compared: XLA's defaults, and the project's.
+OPTION_SETS = {"xla-default": {}, "project": dict(XLA_OPTIONS)}
+
+
+def parser():
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--scene", default="wavy")
+    p.add_argument("--n", type=int, default=65536, help="receivers")
+    p.add_argument("--repeats", type=int, default=5, help="timed calls per configuration (interleaved)")
+    p.add_argument("--dtypes", nargs="+", default=["float32", "float64"])
+    p.add_argument("--configs", nargs="+", default=list(CONFIGS))
+    p.add_argument("--quick", action="store_true", help="8192 receivers, 2 repeats")
+    p.add_argument("--out", default=str(figures_dir() / "compile_options"), help="figure and JSON path (no suffix)")
+    return p
+
+
+# %%
+def agreement(a, b) -> dict:
+    """Lanes whose status differs, and the largest point distance (m) over lanes found by both."""
+    sa, sb = np.asarray(a.status), np.asarray(b.status)
+    both = np.asarray(a.found) & np.asarray(b.found)
+    d = np.linalg.norm(np.asarray(a.point, np.float64) - np.asarray(b.point, np.float64), axis=-1)
+    far = float(d[both].max()) if both.any() else 0.0
+    return {"status_differs": int((sa != sb).sum()), "max_point_distance_m": far}
+
+
+_EVENT = "/jax/core/compile/backend_compile_duration"
+_backend = [0.0]
+
+
+def _listen(name, seconds, **_):
+    if name == _EVENT:
+        _backend[0] += seconds
+
+
+def run(args) -> dict:
+    jax.monitoring.register_event_duration_secs_listener(_listen)
+    n = 8192 if args.quick else args.n
+    repeats = 2 if args.quick else args.repeats
+    cfg = compare.CompareConfig(scene=args.scene, n=n)
+    sc64, _, P, L = compare.scene_arrays(cfg)
+    rows = []
+    for dtype in args.dtypes:
+        prep = prepare(sc64.surface.astype(dtype))
+        Pd, Ld = np.asarray(P, dtype), np.asarray(L, dtype)
+        jax.block_until_ready(prep.start_points(jax.device_put(Pd), jax.device_put(Ld)))
+        for name in args.configs:
+            solver = CONFIGS[name]
+            first, backend, sols, times = {}, {}, {}, {k: [] for k in OPTION_SETS}
+            for key, options in OPTION_SETS.items():
+                with using_xla_options(options):
+                    t, _backend[0] = time.perf_counter(), 0.0
+                    sols[key] = jax.block_until_ready(solve(prep, Pd, Ld, method=solver))
+                    first[key], backend[key] = time.perf_counter() - t, _backend[0]
+            for _ in range(repeats):  # interleaved
+                for key, options in OPTION_SETS.items():
+                    with using_xla_options(options):
+                        t = time.perf_counter()
+                        jax.block_until_ready(solve(prep, Pd, Ld, method=solver))
+                        times[key].append(time.perf_counter() - t)
+            agree = agreement(sols["xla-default"], sols["project"])
+            for key in OPTION_SETS:
+                wall = float(np.median(times[key]))
+                rows.append({"dtype": dtype, "config": name, "options": key, "n": n, "first_s": first[key],
+                             "compile_s": backend[key], "seconds": wall, "solves_per_s": n / wall,
+                             "found": float(np.asarray(sols[key].found).mean()), **agree})
+                r = rows[-1]
+                log(f"[{dtype}] {name:<16}{key:<12} compile {r['compile_s']:5.1f} s  {r['solves_per_s']:>9.0f} solves/s"
+                    f"  status differs {agree['status_differs']}  max point distance "
+                    f"{agree['max_point_distance_m']:.1e} m")
+    return {"rows": rows, "n": n, "repeats": repeats, "scene": args.scene, "options": OPTION_SETS,
+            "platform": jax.default_backend(), "devices": [str(d) for d in jax.local_devices()]}
+
+
+# %%
+def plot(report, path):
+    use_agg()
+    import matplotlib.pyplot as plt
+
+    rows = report["rows"]
+    labels = sorted({(r["dtype"], r["config"]) for r in rows})
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    x = np.arange(len(labels))
+    for i, key in enumerate(OPTION_SETS):
+        sel = {(r["dtype"], r["config"]): r for r in rows if r["options"] == key}
+        for ax, field, scale in ((axes[0], "compile_s", 1.0), (axes[1], "solves_per_s", 1e-3)):
+            ax.bar(x + (i - 0.5) * 0.38, [sel[k][field] * scale for k in labels], 0.38, label=key)
+    names = [f"{c}\n{d}" for d, c in labels]
+    for ax, title, unit in ((axes[0], "XLA compile of the solver program", "seconds"),
+                            (axes[1], "throughput after compiling", "thousand solves per second")):
+        ax.set_xticks(x, names, fontsize=7, rotation=20)
+        ax.set_ylabel(unit)
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7)
+    project = ", ".join(f"{k}={v}" for k, v in XLA_OPTIONS.items())
+    fig.suptitle(f"XLA's default options against the project's ({project}),"
+                 f"\n{report['n']} receivers of '{report['scene']}', {report['platform']}, "
+                 f"{len(report['devices'])} device(s)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def table(report) -> str:
+    head = (f"{'dtype':<9}{'config':<17}{'options':<13}{'compile':>9}{'first':>8}{'solves/s':>11}{'found':>8}"
+            f"{'status differs':>16}")
+    lines = [head, "-" * len(head)]
+    for r in report["rows"]:
+        lines.append(f"{r['dtype']:<9}{r['config']:<17}{r['options']:<13}{r['compile_s']:>8.1f}s{r['first_s']:>7.1f}s"
+                     f"{r['solves_per_s']:>11.0f}{r['found']:>8.4f}{r['status_differs']:>16d}")
+    return "\n".join(lines)
+
+
+# %%
+if __name__ == "__main__":
+    args = parse_args(parser())
+    t0 = time.perf_counter()
+    report = run(args)
+    report["seconds"] = time.perf_counter() - t0
+    write_json(args.out + ".json", report)
+    plot(report, args.out + ".png")
+    print(table(report))
+    log(f"wrote {args.out}.png and .json ({report['seconds']:.0f} s)")
