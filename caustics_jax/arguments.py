@@ -14,8 +14,14 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import sys
+import warnings
 
 import numpy as np
+
+#: The package's directory: frames inside it are not the user's (`warn_user`).
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
 
 #: Largest iteration cap (the counters are int32).
 MAX_INT32 = 2**31 - 1
@@ -222,3 +228,13 @@ def check_dtype(name: str, value) -> np.dtype:
     if dtype not in (np.dtype("float32"), np.dtype("float64")):
         raise ValueError(f"{name} must be 'float32' or 'float64', got {value!r}")
     return dtype
+
+
+def warn_user(message: str, category: type[Warning] = UserWarning) -> None:
+    """`warnings.warn` attributed to the user's line: the first caller outside the package,
+    however deep inside it the warning is raised (a fixed `stacklevel` points into the
+    package when the same check runs under `solve`, `prepare` or `start_points`)."""
+    frame, level = sys._getframe(1), 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)

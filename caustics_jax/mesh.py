@@ -14,7 +14,6 @@ raises a `ValueError` naming the offending faces or vertices before any jitted w
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 import equinox as eqx
 import jax
@@ -23,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from ._precision import check_float_dtype, check_mesh_dtype, default_float_dtype, float_inputs
-from .arguments import check_choice, check_real, real_array
+from .arguments import check_choice, check_real, real_array, warn_user
 from .barycentric import edge_barycentric, edge_param_from_vertex_order
 
 _MAX_NAMED = 10  # how many offending indices an error message lists
@@ -540,15 +539,15 @@ def _warn_if_inward(V: np.ndarray, F: np.ndarray, neighbors: np.ndarray) -> None
         volume = float(np.sum(np.einsum("ij,ij->i", V[F[:, 0]] - c, np.cross(V[F[:, 1]] - c, V[F[:, 2]] - c))))
         scale = total * float(np.max(np.linalg.norm(V - c, axis=-1)))
         if volume < -1e-9 * scale:
-            warnings.warn(
+            warn_user(
                 "surface normals point into the closed mesh (negative enclosed volume): faces are wound "
                 "clockwise seen from outside, so every lane would end TIR or LEFT_MESH. Reverse the face "
-                "winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1])", UserWarning, stacklevel=3)
+                "winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1])")
         return
     down = float(np.sum(cross[:, 2]))
     if down < -0.5 * total:
-        warnings.warn(
+        warn_user(
             f"surface normals point mostly down (-z: {100 * -down / total:.0f}% of the area faces down): "
             "normals must face the light (MATH.md §1), so with a light above, every lane would end TIR or "
             "LEFT_MESH. Reverse the face winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1]); "
-            "if the light really is below the surface, ignore this warning", UserWarning, stacklevel=3)
+            "if the light really is below the surface, ignore this warning")

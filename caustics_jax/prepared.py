@@ -31,7 +31,6 @@ A mesh changed with `eqx.tree_at` (animated water) is a new object and is prepar
 from __future__ import annotations
 
 import copy
-import warnings
 import weakref
 
 import jax
@@ -39,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._precision import check_mesh_dtype
+from .arguments import warn_user
 from .features import SceneFeatures, mesh_features
 from .frames import grid_state, local_mesh, local_origin
 from .lanes import padded_mesh
@@ -54,11 +54,11 @@ class _Analysis:
     def __init__(self, mesh: SurfaceMesh):
         self.grid = grid_state(mesh)
         if self.grid == "stale":
-            warnings.warn(f"the mesh's vertices are up to {mesh.grid_deviation():.3g} m off its regular grid "
-                          f"{mesh.grid}: its xy changed after the grid was built (eqx.tree_at on vertices? only "
-                          "heights may change). The start points bin the faces instead of trusting the grid; "
-                          "rebuild it with SurfaceMesh.from_arrays or from_heightfield, or move it with "
-                          "mesh.translated(offset)", stacklevel=4)
+            warn_user(f"the mesh's vertices are up to {mesh.grid_deviation():.3g} m off its regular grid "
+                      f"{mesh.grid}: its xy changed after the grid was built (eqx.tree_at on vertices? only "
+                      "heights may change). The start points bin the faces instead of trusting the grid; "
+                      "rebuild it with SurfaceMesh.from_arrays or from_heightfield, or move it with "
+                      "mesh.translated(offset)")
         self.padded = padded_mesh(mesh)
         self.features: SceneFeatures = mesh_features(mesh)
         V = np.asarray(mesh.vertices, np.float64)

@@ -839,3 +839,37 @@ def test_a_mesh_of_numpy_arrays_changed_in_place_is_analysed_again():
     assert np.asarray(fresh.found).all()
     np.testing.assert_array_equal(np.asarray(moved.status), np.asarray(fresh.status))
     np.testing.assert_array_equal(np.asarray(moved.point), np.asarray(fresh.point))
+
+
+def test_warnings_about_the_input_point_at_the_callers_line():
+    """Each warning about the user's input is attributed to the user's line
+    (`arguments.warn_user`). With a fixed `stacklevel`, the stale-grid warning, raised in
+    `prepare`'s analysis, pointed inside the package when `solve` or `start_points` ran it."""
+    import warnings
+
+    def user_warnings(fn):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fn()
+        return [w for w in caught if issubclass(w.category, UserWarning)]
+
+    sc = scenes.wavy_pool(128, dtype="float32")
+    m = sc.surface
+    V = np.array(m.vertices)
+    V[:, :2] += 3.0  # xy moved without the grid: a stale grid
+    P, L = np.array([[3.0, 3.0, -1.0]]), np.array([3.3, 2.7, 3.0])
+    stale = lambda: eqx.tree_at(lambda q: q.vertices, m, jnp.asarray(V))  # noqa: E731  (a new mesh object each time)
+    receivers = np.asarray(sc.receivers)[:64]
+    lights = np.asarray(sc.lights.endpoint(receivers))
+    flat = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    cases = {
+        "solve, stale grid": lambda: cj.solve(stale(), P, L),
+        "prepare, stale grid": lambda: cj.prepare(stale()),
+        "start_points, stale grid": lambda: cj.start_points(stale(), P.astype(np.float32), L.astype(np.float32)),
+        "from_arrays, wound clockwise": lambda: cj.SurfaceMesh.from_arrays(flat, np.array([[0, 2, 1], [1, 2, 3]])),
+        "solve, P and L swapped": lambda: cj.solve(m, lights, receivers),
+    }
+    for name, call in cases.items():
+        caught = user_warnings(call)
+        assert caught, name
+        assert [w.filename for w in caught] == [__file__] * len(caught), name

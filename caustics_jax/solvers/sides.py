@@ -15,10 +15,9 @@ failed does it look at why (start points of at most `SAMPLE` failed lanes).
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
+from ..arguments import warn_user
 from ..prepared import PreparedSurface
 from ._solution import Solution, Status
 
@@ -58,9 +57,9 @@ def warn_if_wrong_sides(prep: PreparedSurface, P, L, sol: Solution) -> None:
         return
     failed, wrong = wrong_side_fraction(prep, P, L, sol)
     if failed > FRACTION and wrong > FRACTION:
-        warnings.warn(
+        warn_user(
             f"{100 * failed:.0f}% of the lanes crossing the surface failed, and {100 * wrong:.0f}% of those "
             "cross it against its normals: P must be inside the medium (behind the normals) and L outside "
             "(MATH.md §1). Swap P and L, or, if the mesh is wound clockwise (normals away from the light), "
             "reverse the face winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1])",
-            UserWarning, stacklevel=3)
+        )
