@@ -127,7 +127,7 @@ XLA_ENV = "CAUSTICS_JAX_XLA_OPTIONS"
 #: the walk program's XLA compile 7.0-8.2 s instead
 #: of 10.7-12.8 s, one-step Newton's 2.4-3.1 s instead of 3.1-4.2 s and 15-26% faster
 #: calls, the float32 walk as fast, the float64 walk 5-14% slower; statuses identical on
-#: 65,536 lanes. Other backends ignore the option (it is a CPU one).
+#: 65,536 lanes. Only CPU programs take them (`jit_kwargs`).
 XLA_OPTIONS: dict = {"xla_cpu_use_fusion_emitters": False}
 
 
@@ -169,16 +169,20 @@ def using_xla_options(options: dict | None) -> Iterator[None]:
         _xla = saved
 
 
-def jit_kwargs() -> dict:
-    """`jax.jit`'s keyword arguments for the project's XLA options (`xla_options()`):
-    `{"compiler_options": ...}`, or `{}` for XLA's defaults."""
-    return {"compiler_options": xla_options()} if _xla else {}
+def jit_kwargs(platform: str | None = None) -> dict:
+    """`jax.jit`'s keyword arguments for the project's XLA options (`xla_options()`) on
+    `platform` (default: JAX's default backend): `{"compiler_options": ...}` on the CPU,
+    `{}` for XLA's defaults or another platform (the options are XLA:CPU's; a GPU program
+    compiles exactly as without them)."""
+    if not _xla or (platform or jax.default_backend()) != "cpu":
+        return {}
+    return {"compiler_options": xla_options()}
 
 
-def jit(fun, **kwargs):
-    """`jax.jit` with the project's XLA options (`jit_kwargs()`, read when `jit` runs), for
-    top-level programs only: JAX refuses `compiler_options` on a jitted function called
-    inside another trace (a kernel inside a user's `jit`), so the package's kernels and
-    decorated functions keep XLA's defaults and only the solvers' block programs
+def jit(fun, platform: str | None = None, **kwargs):
+    """`jax.jit` with the project's XLA options (`jit_kwargs(platform)`, read when `jit`
+    runs), for top-level programs only: JAX refuses `compiler_options` on a jitted function
+    called inside another trace (a kernel inside a user's `jit`), so the package's kernels
+    and decorated functions keep XLA's defaults and only the solvers' block programs
     (`lanes.on_devices`) take these options."""
-    return jax.jit(fun, **jit_kwargs(), **kwargs)
+    return jax.jit(fun, **jit_kwargs(platform), **kwargs)

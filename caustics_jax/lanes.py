@@ -414,11 +414,12 @@ def _compiled(fn, static, n_shared: int, n_lanes: int, devices: tuple, spmd: boo
     def program(*args):
         return fn(*args, static)
 
+    platform = devices[0].platform
     if len(devices) == 1 or not spmd:
-        return jit(program)
+        return jit(program, platform)
     specs = (PartitionSpec(),) * n_shared + (PartitionSpec("lanes"),) * n_lanes
     return jit(jax.shard_map(program, mesh=lane_mesh(devices), in_specs=specs,
-                             out_specs=PartitionSpec("lanes"), check_vma=False))
+                             out_specs=PartitionSpec("lanes"), check_vma=False), platform)
 
 
 def on_devices(fn, static, shared: tuple, lanes: tuple, *, spmd: bool = True):

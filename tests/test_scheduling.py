@@ -263,6 +263,15 @@ def test_a_misspelt_xla_options_setting_is_refused():
             pass
 
 
+def test_xla_options_are_passed_to_cpu_programs_only():
+    with compilation.using_xla_options(compilation.XLA_OPTIONS):
+        assert compilation.jit_kwargs("cpu") == {"compiler_options": compilation.XLA_OPTIONS}
+        assert compilation.jit_kwargs("gpu") == {} and compilation.jit_kwargs("tpu") == {}
+    with compilation.using_xla_options({}):
+        assert compilation.jit_kwargs("cpu") == {}
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="the options are XLA:CPU's")
 def test_the_project_xla_options_reach_every_block_program():
     """The block programs (`lanes.on_devices`) compile with `compilation.xla_options()`: an
     option XLA does not know fails their compile, so the options are passed; the project's
