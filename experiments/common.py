@@ -67,6 +67,20 @@ def parse_args(parser: argparse.ArgumentParser, argv=None) -> argparse.Namespace
     return parser.parse_args(argv)
 
 
+def run_and_write(parser: argparse.ArgumentParser, run, plot, table) -> dict:
+    """An experiment's command-line run: `run(args)`, timed; the report as `<--out>.json`,
+    its figure `plot(report, <--out>.png)` and its table `table(report)` printed."""
+    args = parse_args(parser)
+    t0 = time.perf_counter()
+    report = run(args)
+    report["seconds"] = time.perf_counter() - t0
+    write_json(args.out + ".json", report)
+    plot(report, args.out + ".png")
+    print(table(report))
+    log(f"wrote {args.out}.png and .json ({report['seconds']:.0f} s)")
+    return report
+
+
 def _json_safe(x):
     """`x` with numpy scalars and arrays as Python numbers and lists, NaN and inf as None."""
     if isinstance(x, dict):

@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 
 from caustics_jax import Newton, Walk, compare, prepare, solve  # noqa: E402
 from caustics_jax.compilation import XLA_OPTIONS, using_xla_options  # noqa: E402
-from experiments.common import figures_dir, log, parse_args, use_agg, write_json  # noqa: E402
+from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
 
 CONFIGS = {"walk": Walk(), "newton-hv-step": Newton(stepping="one_step"), "newton-hv": Newton()}
 #: The option sets compared: XLA's defaults, and the project's.
@@ -155,11 +155,4 @@ def table(report) -> str:
 
 # %%
 if __name__ == "__main__":
-    args = parse_args(parser())
-    t0 = time.perf_counter()
-    report = run(args)
-    report["seconds"] = time.perf_counter() - t0
-    write_json(args.out + ".json", report)
-    plot(report, args.out + ".png")
-    print(table(report))
-    log(f"wrote {args.out}.png and .json ({report['seconds']:.0f} s)")
+    run_and_write(parser(), run, plot, table)
