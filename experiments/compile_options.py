@@ -15,6 +15,11 @@
 # option set is traced first (the second reuses traces of nested functions).
 # Statuses must agree lane for lane, points within float rounding: reported.
 #
+# The walk's slot pool alone ("scheduler" rows): `lanes.run_pools` on the walk's real lane
+# states and its real step counts (from the walk's own solve, crossings then refinement
+# steps), with steps that only count, so that only the scheduler's data movement (refill
+# gathers, write-back scatters, queues) is timed, under both option sets.
+#
 # Persistent compilation cache off (compile times, not cache loads). Run:
 # `python -m experiments.compile_options` (`--quick`: 8192 receivers, 2 repeats).
 # Writes `figures/compile_options.png` and `.json` and prints the table; docs/solvers.md
@@ -33,10 +38,13 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built explicitly)
 
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from caustics_jax import Newton, Walk, compare, prepare, solve  # noqa: E402
 from caustics_jax.compilation import XLA_OPTIONS, using_xla_options  # noqa: E402
+from caustics_jax.lanes import pool_slots, run_pools  # noqa: E402
+from caustics_jax.solvers.walk import BISECT, DONE, WALK, walk_init, walk_turn_back  # noqa: E402
 from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
 
 CONFIGS = {"walk": Walk(), "newton-hv-step": Newton(stepping="one_step"), "newton-hv": Newton()}
@@ -64,6 +72,53 @@ def agreement(a, b) -> dict:
     d = np.linalg.norm(np.asarray(a.point, np.float64) - np.asarray(b.point, np.float64), axis=-1)
     far = float(d[both].max()) if both.any() else 0.0
     return {"status_differs": int((sa != sb).sum()), "max_point_distance_m": far}
+
+
+def scheduler_alone(prep, P, L, sol, repeats: int) -> dict:
+    """Seconds per block of the walk's slot pool with counting steps, per option set (module
+    docstring). Each lane needs `crossed` WALK steps then the rest of its `iterations` as
+    BISECT steps, as the walk's solve `sol` took them; the counts ride in the state's
+    `crossed` and `side` fields, the turn-back runs after each step as in the walk."""
+    mesh, dtype = prep.padded, prep.dtype
+    solver = Walk()
+    eta, tol = jnp.asarray(1.333, dtype), jnp.asarray(solver.tolerance(dtype), dtype)
+    P, L = jnp.asarray(P), jnp.asarray(L)
+    face, ab0, found = prep.start_points(P, L)
+    lanes = jax.jit(jax.vmap(lambda p, l, f, a, ok: walk_init(mesh, p, l, f, a, ok, eta, tol, solver)[0]))(
+        P, L, face, ab0, found)
+    steps = np.asarray(sol.iterations)
+    need_w = jnp.asarray(np.minimum(np.asarray(sol.crossed), steps), jnp.int32)
+    need_b = jnp.asarray(steps, jnp.int32) - need_w
+
+    def program(lanes, need_w, need_b):
+        s = lanes.state
+        mode = jnp.where(need_w > 0, WALK, jnp.where(need_b > 0, BISECT, DONE)).astype(jnp.int32)
+        lanes = lanes._replace(state=s._replace(mode=mode, steps=jnp.zeros_like(s.steps), crossed=need_w,
+                                                side=need_b))
+
+        def count(lane):
+            s = lane.state
+            k = s.steps + 1
+            mode = jnp.where(k < s.crossed, WALK, jnp.where(k < s.crossed + s.side, BISECT, DONE))
+            return lane._replace(state=s._replace(steps=k, mode=mode.astype(jnp.int32)))
+
+        def route(lane):
+            return jnp.where(lane.state.mode != DONE, lane.state.mode, -1).astype(jnp.int32)
+
+        return run_pools((count, count), route, lanes, pool_slots(), after=walk_turn_back)
+
+    args = (lanes, need_w, need_b)
+    compiled = {}
+    for key, options in OPTION_SETS.items():
+        compiled[key] = jax.jit(program, compiler_options=options or None).lower(*args).compile()
+    times = {k: [] for k in OPTION_SETS}
+    for _ in range(max(repeats, 3)):
+        for key, c in compiled.items():
+            jax.block_until_ready(c(*args))
+            t = time.perf_counter()
+            jax.block_until_ready(c(*args))
+            times[key].append(time.perf_counter() - t)
+    return {key: float(np.median(v)) for key, v in times.items()}
 
 
 _EVENT = "/jax/core/compile/backend_compile_duration"
@@ -101,6 +156,13 @@ def run(args) -> dict:
                         jax.block_until_ready(solve(prep, Pd, Ld, method=solver))
                         times[key].append(time.perf_counter() - t)
             agree = agreement(sols["xla-default"], sols["project"])
+            if name == "walk":
+                sched = scheduler_alone(prep, Pd, Ld, sols["xla-default"], repeats)
+                for key in OPTION_SETS:
+                    rows.append({"dtype": dtype, "config": "walk scheduler alone", "options": key, "n": n,
+                                 "seconds": sched[key], "solves_per_s": n / sched[key]})
+                log(f"[{dtype}] walk's slot pool alone (counting steps): " + ", ".join(
+                    f"{k} {v * 1e3:.1f} ms" for k, v in sched.items()))
             for key in OPTION_SETS:
                 wall = float(np.median(times[key]))
                 rows.append({"dtype": dtype, "config": name, "options": key, "n": n, "first_s": first[key],
@@ -119,7 +181,7 @@ def plot(report, path):
     use_agg()
     import matplotlib.pyplot as plt
 
-    rows = report["rows"]
+    rows = [r for r in report["rows"] if "compile_s" in r]  # the scheduler rows are in the table only
     labels = sorted({(r["dtype"], r["config"]) for r in rows})
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     x = np.arange(len(labels))
@@ -148,8 +210,14 @@ def table(report) -> str:
             f"{'status differs':>16}")
     lines = [head, "-" * len(head)]
     for r in report["rows"]:
+        if "compile_s" not in r:
+            continue
         lines.append(f"{r['dtype']:<9}{r['config']:<17}{r['options']:<13}{r['compile_s']:>8.1f}s{r['first_s']:>7.1f}s"
                      f"{r['solves_per_s']:>11.0f}{r['found']:>8.4f}{r['status_differs']:>16d}")
+    for r in report["rows"]:
+        if "compile_s" not in r:
+            lines.append(f"{r['dtype']:<9}{r['config']} ({r['options']}): {r['seconds'] * 1e3:.1f} ms per "
+                         f"{r['n']} lanes")
     return "\n".join(lines)
 
 
