@@ -78,7 +78,8 @@ def scheduler_alone(prep, P, L, sol, repeats: int) -> dict:
     """Seconds per block of the walk's slot pool with counting steps, per option set (module
     docstring). Each lane needs `crossed` WALK steps then the rest of its `iterations` as
     BISECT steps, as the walk's solve `sol` took them; the counts ride in the state's
-    `crossed` and `side` fields, the turn-back runs after each step as in the walk."""
+    `crossed` and `side` fields, and the two passes with the turn-back between them are
+    the walk's (`walk._walk_pool`)."""
     mesh, dtype = prep.padded, prep.dtype
     solver = Walk()
     eta, tol = jnp.asarray(1.333, dtype), jnp.asarray(solver.tolerance(dtype), dtype)
@@ -105,7 +106,12 @@ def scheduler_alone(prep, P, L, sol, repeats: int) -> dict:
         def route(lane):
             return jnp.where(lane.state.mode != DONE, lane.state.mode, -1).astype(jnp.int32)
 
-        return run_pools((count, count), route, lanes, pool_slots(), after=walk_turn_back)
+        def walk_pass(_, lanes):  # as `walk._walk_pool`: turn back between two passes
+            lanes = jax.vmap(walk_turn_back)(lanes)
+            moving = lanes._replace(turned=None, can_flip=None, other=None)
+            return lanes._replace(state=run_pools((count, count), route, moving, pool_slots()).state)
+
+        return jax.lax.fori_loop(0, 2, walk_pass, lanes)
 
     args = (lanes, need_w, need_b)
     compiled = {}
