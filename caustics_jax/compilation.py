@@ -20,7 +20,7 @@ together). The cache is trusted code: keep it in a directory only you can write 
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 
 The solvers' block programs compile with the project's XLA options (`jit`, `XLA_OPTIONS`:
-XLA:CPU's loop emitters, which compile the walk in 6.3-8.2 s, not 10.7-12.8 s);
+XLA:CPU's loop emitters, which compile the walk in 6.1-8.2 s, not 10.2-12.8 s);
 `CAUSTICS_JAX_XLA_OPTIONS=default` keeps XLA's own options.
 
 In memory, every compiled program holds about three memory mappings of the process on
@@ -124,10 +124,11 @@ XLA_ENV = "CAUSTICS_JAX_XLA_OPTIONS"
 #: its MLIR fusion emitters (`xla_cpu_use_fusion_emitters`, on by default in this JAX).
 #: Measured on the 2-core CPU, cache off, solver programs of the default pool, both option
 #: sets in one process (`experiments/compile_options.py`, docs/solvers.md "Compilation"):
-#: the walk program's XLA compile 6.3-8.2 s instead
-#: of 10.7-12.8 s, one-step Newton's 2.2-3.1 s instead of 3.1-4.2 s and 15-26% faster
-#: calls, the float32 walk within 4%, the float64 walk 5-14% slower; statuses identical on
-#: 65,536 lanes. Only CPU programs take them (`jit_kwargs`).
+#: the walk program's XLA compile 6.1-8.2 s instead
+#: of 10.2-12.8 s, one-step Newton's 2.2-3.1 s instead of 3.0-4.2 s and 10-26% faster
+#: calls, the float32 walk within 4%, the float64 walk 5-14% slower (1.06x and 1.12x
+#: faster in the run after the walk's two-pass pool); statuses identical on 65,536 lanes.
+#: Only CPU programs take them (`jit_kwargs`).
 XLA_OPTIONS: dict = {"xla_cpu_use_fusion_emitters": False}
 
 
