@@ -705,7 +705,9 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     # walk again. Per lane the same steps as turning back right after the failing step
     # (the step count carries over, so `max_steps` caps both ways together); the pools
     # move 24 fields per lane (35 numbers) instead of 48 (66) and run no turn-back per trip
-    # (the pool alone, counting steps: 59-88 ms -> 20-24 ms per 32,768 float64 lanes).
+    # (the pool alone with counting steps, 32,768 float64 lanes: 59-88 ms before, 20-24 ms
+    # without the per-step turn-back and the second state; `experiments/compile_options.py`'s
+    # "scheduler alone" rows measure the pool as it is).
     steps = tuple(lambda lane, m=m: walk_step(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT))
 
     def walk_pass(_, lanes):
