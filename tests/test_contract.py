@@ -413,7 +413,7 @@ def test_a_bad_start_is_a_value_error(pool, no_jit_work, start, match):
     (lambda P: P.astype(bool), "P must hold real"), (lambda P: P.astype(complex), "P must hold real"),
     (lambda P: "abc", "P must hold real"), (lambda P: None, "P must"), (lambda P: P[:, :2], r"P must have shape"),
     (lambda P: np.where(np.arange(8)[:, None] == 2, np.nan, P), r"P has NaN.*rows \[2\]"),
-    (lambda P: P * 1e39, "overflow float32"),
+    (lambda P: P.astype(np.float64) * 1e39, "overflow float32"),
 ])
 def test_bad_points_are_refused_by_solve_irradiance_and_start_points(pool, no_jit_work, P, match):
     mesh, P0, L = pool

@@ -20,10 +20,10 @@ from ..arguments import check_fits, check_points, check_scene_scale, check_tol_r
 from ..compilation import enable_compilation_cache
 from ..features import GENERAL, SceneFeatures
 from ..features import check as check_features
-from ..lanes import lane_mesh, run_blocks
+from ..lanes import lane_mesh, on_devices, run_blocks
 from ..mesh import SurfaceMesh
 from ..prepared import PreparedSurface, prepare
-from ..start_points import StartPoint
+from ..start_points import StartPoint, first_crossing
 from ._solution import Solution, Status
 from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
 from .flat import flat_root, flat_solution
@@ -292,7 +292,7 @@ def _solve_block(prep: PreparedSurface, eta, solver, flat: bool, P, L, lane_id, 
     if start:
         face, ab0, found = (jax.device_put(x, sharding) for x in start)
     else:
-        face, ab0, found = prep.start_points(P, L)
+        face, ab0, found = _block_start_points(prep, P, L)
     if isinstance(solver, Walk):
         run = lambda need: solve_walk(prep.padded, P, L, eta, (face, ab0, need), solver)  # noqa: E731
     else:
@@ -301,11 +301,25 @@ def _solve_block(prep: PreparedSurface, eta, solver, flat: bool, P, L, lane_id, 
         return _fields(run(found))
     mesh = prep.mesh
     _, below, above, usable = flat_root(mesh, P, L, eta)
-    located = prep.start_points(below, above)
+    located = _block_start_points(prep, below, above)
     flat_sol, good = flat_solution(mesh, P, L, eta, solver.tolerance(prep.dtype), usable, tuple(located),
                                    face, ab0)
     good = good & found
     return _select_fields(good, _fields(flat_sol), _fields(run(found & ~good)))
+
+
+def _block_start_points(prep: PreparedSurface, P, L) -> StartPoint:
+    """`prep.start_points(P, L)` for one block (validated lanes of the block's shape, in
+    `prep`'s frame) as a block program (`lanes.on_devices`): compiled once per mesh size
+    class and accel shape with the project's XLA options, its lanes split over the devices."""
+    mesh = prep.padded  # no static grid: the accel carries the layout as arrays
+    face, ab, found = on_devices(_start_points_program, None, (mesh, prep.accel), (P, L))
+    return StartPoint(face, ab, found)
+
+
+def _start_points_program(mesh, accel, P, L, static):
+    del static
+    return first_crossing(mesh, P, L, accel=accel)
 
 
 def _fields(sol: Solution) -> dict:
