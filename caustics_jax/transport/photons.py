@@ -18,7 +18,9 @@ error `sqrt(sum Phi_i^2)/area` (each photon lands in a cell independently). Phot
 meet the surface from below its shading normal, or miss it, carry nothing.
 
 Chunks of photons are traced jitted (one compile per chunk size) and binned on the host
-in float64, so 10^7-10^8 photons run in minutes on a CPU.
+in float64, so 10^7-10^8 photons run in minutes on a CPU. Exactly `n_photons` photons are
+emitted: the last chunk's surplus lanes carry nothing, and a count below the chunk size
+traces one chunk of the power of two above it (at least 256), not a whole default chunk.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from .._precision import check_mesh_dtype
 from ..arguments import check_eta, check_fits, check_int, check_points, check_real
 from ..barycentric import barycentric_point, interpolated_normal
 from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
+from ..lanes import power_of_two_bucket
 from ..mesh import SurfaceMesh
 from ..prepared import PreparedSurface, kept_accel, prepare
 from ..progress import progress as progress_bar
@@ -146,9 +149,12 @@ class PhotonMap(NamedTuple):
 
     Attributes:
         irradiance: `(ny, nx)` W/m^2 (float64).
-        stderr: `(ny, nx)` Monte-Carlo standard error of `irradiance`.
+        stderr: `(ny, nx)` Monte-Carlo standard error of `irradiance`, estimated from the
+            photons in the cell (`sqrt(sum Phi_i^2) / area`): 0 where no photon landed
+            (`hits == 0`), which bounds nothing there, and unreliable where few did; read
+            it with `hits`.
         hits: `(ny, nx)` photons binned per cell.
-        n_photons: photons emitted.
+        n_photons: photons emitted (the `n_photons` asked for).
         receiver: the grid.
     """
 
@@ -201,8 +207,9 @@ def refract_into_medium(d, n_s, eta):
 
 
 @functools.partial(jax.jit, static_argnames=("chunk",))
-def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total, chunk: int):
-    """`chunk` photons: their receiver-plane hits `(chunk, 2)`, flux `(chunk,)` and validity."""
+def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total, count, chunk: int):
+    """`chunk` photons, the first `count` of them emitted: their receiver-plane hits
+    `(chunk, 2)`, flux `(chunk,)` and validity (False for the rest)."""
     dtype = mesh.dtype
     z_e, x0, x1, y0, y1 = plane
     u = jax.random.uniform(key, (chunk, 2), dtype)
@@ -219,7 +226,7 @@ def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total
     down = r[:, 2] < 0
     t = (z_r - M[:, 2]) / jnp.where(down, r[:, 2], -1)
     Y = M + t[:, None] * r
-    valid = found & ok & down
+    valid = found & ok & down & (jnp.arange(chunk) < count)
     w = jnp.where(valid, flux * T * jnp.exp(-sigma_t * t), 0)
     return Y[:, :2], w.astype(dtype), valid
 
@@ -235,10 +242,11 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
         intensity: radiant intensity `I_e` (W/sr).
         eta: `eta_in / eta_out`.
         receiver: the binning grid on the plane `z = receiver.z` (below the surface).
-        n_photons: photons emitted through the emission plane (rounded up to whole chunks).
+        n_photons: photons emitted through the emission plane (exactly this many).
         seed: `jax.random` seed; chunk `i` uses `fold_in(key, i)`.
         sigma_t: Beer-Lambert extinction in the medium (1/m).
-        chunk: photons traced per jitted call.
+        chunk: most photons traced per jitted call (fewer `n_photons`: one call of the
+            power of two above it, at least 256; a new size compiles once).
         progress: optional callable `progress(done, total)`, called after each chunk; a
             progress bar is drawn on a terminal in any case (`caustics_jax.progress`).
 
@@ -268,7 +276,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     if n_photons == 0 or receiver.nx * receiver.ny == 0:  # nothing emitted, or nowhere to bin
         zeros = np.zeros(shape)
         return PhotonMap(irradiance=zeros, stderr=zeros.copy(), hits=np.zeros(shape, np.int64),
-                         n_photons=0 if n_photons == 0 else -(-n_photons // chunk) * chunk, receiver=receiver)
+                         n_photons=n_photons, receiver=receiver)
     # Traced in the frame of `prep.local` (a far mesh moved near the origin,
     # `frames.local_origin`), binned in the receiver's.
     origin = prep.origin
@@ -278,19 +286,20 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     plane = EmissionPlane.covering(mesh, L_np)
     x0, y0 = receiver.x0 - origin[0], receiver.y0 - origin[1]
     bvh = None if mesh.grid is not None else prep.local.bvh  # built once per mesh (`prepare`)
+    chunk = min(chunk, power_of_two_bucket(n_photons, 256))
     n_chunks = -(-n_photons // chunk)
-    total = n_chunks * chunk
     key = jax.random.PRNGKey(seed)
     E = np.zeros(receiver.nx * receiver.ny)
     E2 = np.zeros_like(E)
     hits = np.zeros(receiver.nx * receiver.ny, np.int64)
     args = (jnp.asarray(L_np, dtype), jnp.asarray(tuple(plane), dtype), jnp.asarray(receiver.z - origin[2], dtype),
             jnp.asarray(eta, dtype), jnp.asarray(sigma_t, dtype), jnp.asarray(intensity, dtype),
-            jnp.asarray(total, dtype))
-    with progress_bar(total=total, desc="photons", unit="photon", unit_scale=True) as bar:
+            jnp.asarray(n_photons, dtype))
+    with progress_bar(total=n_photons, desc="photons", unit="photon", unit_scale=True) as bar:
         for i in range(n_chunks):
+            count = min(chunk, n_photons - i * chunk)
             Y, w, valid = (np.asarray(x) for x in _trace_chunk(
-                mesh, bvh, jax.random.fold_in(key, i), *args, chunk=chunk))
+                mesh, bvh, jax.random.fold_in(key, i), *args, jnp.int32(count), chunk=chunk))
             ix = np.floor((Y[:, 0] - x0) / receiver.dx)
             iy = np.floor((Y[:, 1] - y0) / receiver.dy)
             inside = valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
@@ -299,9 +308,9 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
             E += np.bincount(cell, w, E.size)
             E2 += np.bincount(cell, w * w, E.size)
             hits += np.bincount(cell, minlength=E.size)
-            bar.update(chunk)
+            bar.update(count)
             if progress is not None:
-                progress((i + 1) * chunk, total)
+                progress(i * chunk + count, n_photons)
     area = receiver.cell_area
     return PhotonMap(irradiance=(E / area).reshape(shape), stderr=(np.sqrt(E2) / area).reshape(shape),
-                     hits=hits.reshape(shape), n_photons=total, receiver=receiver)
+                     hits=hits.reshape(shape), n_photons=n_photons, receiver=receiver)
