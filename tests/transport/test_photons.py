@@ -64,12 +64,22 @@ def test_same_seed_same_map_and_attenuation():
     assert np.exp(-0.5 * 1.2) < ratio < np.exp(-0.5)
 
 
-@pytest.mark.parametrize("n, chunk, calls", [(1000, 512, [(512, 1000), (1000, 1000)]), (300, 1 << 16, [(300, 300)])])
-def test_exactly_n_photons_are_emitted_whatever_the_chunk(n, chunk, calls):
+@pytest.mark.parametrize("n, chunk, calls, traced", [(1000, 512, [(512, 1000), (1000, 1000)], [512, 512]),
+                                                     (300, 1 << 16, [(300, 300)], [512])])
+def test_exactly_n_photons_are_emitted_whatever_the_chunk(n, chunk, calls, traced, monkeypatch):
     """`n_photons` is what is emitted (it had been rounded up to whole chunks: 256 photons
     traced 65,536): with eta = 1 every photon through the emission plane that meets the
     surface lands on a receiver covering everything below, so at most `n` land and nearly
-    all do; a count under the chunk size runs one small chunk."""
+    all do; a count under the chunk size traces one chunk of the power of two above it."""
+    from caustics_jax.transport import photons
+
+    sizes, trace_chunk = [], photons._trace_chunk
+
+    def spy(*args, chunk):
+        sizes.append(chunk)
+        return trace_chunk(*args, chunk=chunk)
+
+    monkeypatch.setattr(photons, "_trace_chunk", spy)
     scene = scenes.flat_pool(512, dtype=jnp.float64)
     seen = []
     pm = photon_irradiance(scene.surface, LIGHT, intensity=1.0, eta=1.0, n_photons=n, chunk=chunk,
@@ -77,7 +87,7 @@ def test_exactly_n_photons_are_emitted_whatever_the_chunk(n, chunk, calls):
                            progress=lambda done, total: seen.append((done, total)))
     assert pm.n_photons == n
     assert 0.9 * n <= pm.hits.sum() <= n
-    assert seen == calls
+    assert seen == calls and sizes == traced
 
 
 @pytest.mark.parametrize("kwargs, match", [
