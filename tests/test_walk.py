@@ -151,28 +151,6 @@ def test_bisection_and_illinois_agree():
     assert np.median(np.asarray(b.iterations)) < np.median(np.asarray(a.iterations))
 
 
-@pytest.mark.parametrize("dtype", DTYPES)
-def test_an_illinois_cut_off_the_bracketed_arc_is_replaced_by_the_midpoint_cut(dtype):
-    """On a steep pool the false-position chord cut of one planted lane (645 of 1000) lands on
-    another piece of the conic, outside the bracket's pencil angles: it had been accepted,
-    and the lane ended NOT_CONVERGED in both dtypes (bisection found it), with a status that
-    changed when each face's vertices were listed in another cyclic order. The midpoint
-    chord cut replaces such a cut: every lane here is FOUND, as with bisection, and the
-    statuses do not depend on the vertex order."""
-    surface = scenes.wavy_pool(2048, seed=5, amplitude=0.1, wavelength=(0.5, 1.2)).surface
-    p = planted_mesh_paths(surface, 1000, seed=11)
-    lanes = np.arange(630, 660)
-    P, L = p.P[lanes].astype(dtype), p.L[lanes].astype(dtype)
-    V, F = np.asarray(surface.vertices, np.float64), np.asarray(surface.faces)
-    relabelled = SurfaceMesh.from_arrays(V, F[:, [1, 2, 0]], normals=np.asarray(surface.normals, np.float64))
-    sol = solve(surface.astype(dtype), P, L, features=None)
-    assert_solution_sane(sol, dtype)
-    status = np.asarray(sol.status)
-    assert np.all(status == Status.FOUND), status
-    np.testing.assert_array_equal(np.asarray(solve(relabelled.astype(dtype), P, L, features=None).status), status)
-    np.testing.assert_array_equal(np.asarray(solve(surface.astype(dtype), P, L, bracket="bisection").status), status)
-
-
 @pytest.mark.parametrize(
     "kwargs, match",
     [

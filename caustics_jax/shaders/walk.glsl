@@ -17,7 +17,6 @@
 // within the same step budget. FOUND exactly when |f| <= tol at the returned point.
 
 const int CJ_WALK = 0, CJ_BISECT = 1, CJ_DONE = 2;
-const int CJ_RETRY = 2;  // WalkState.side after a refused false-position cut (walk.RETRY)
 // Status codes (the manifest's status table) and ObjectiveStatus codes.
 const uint CJ_FOUND = 0u, CJ_NO_CROSSING = 1u, CJ_S_TIR = 2u, CJ_LEFT_MESH = 3u, CJ_MAX_STEPS = 4u,
            CJ_UNRESOLVED_ELLIPSE = 5u, CJ_DEGENERATE = 6u, CJ_LOST_CURVE = 7u, CJ_NOT_CONVERGED = 8u;
@@ -37,7 +36,7 @@ struct WalkState {
     vec2 perp;   // tau rotated +90 deg, times the bend sense sigma
     float phi_lo, phi_hi, f_lo, f_hi;
     vec2 ab_lo, ab_hi;  // bracket ends as points (for the chord cut)
-    int side;     // Illinois: which end was replaced last (-1 lo, +1 hi, 0 none; CJ_RETRY: cut at the midpoint)
+    int side;     // Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
     int tir_end;  // TIR search: which end is totally reflecting (-1 lo, +1 or 2 hi, 0 none)
     vec2 best_ab;
     float best_f;
@@ -338,13 +337,10 @@ WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool
     Frame fr = cj_frame(s.face, P, L);
     float denom = s.f_hi - s.f_lo;
     float lam = 0.5;
-    bool false_position = false;
     if (illinois) {
         float frac = -s.f_lo / (denom != 0.0 ? denom : 1.0);  // false position, from the lo end
         lam = denom != 0.0 ? clamp(frac, 1e-6, 0.999999) : 0.5;
-        // f is 0 at a TIR end: no false position; nor after a false-position cut off the arc.
-        false_position = denom != 0.0 && s.tir_end == 0 && s.side != CJ_RETRY;
-        lam = false_position ? lam : 0.5;
+        lam = s.tir_end != 0 ? 0.5 : lam;  // f is 0 at a TIR end: no false position
     }
     float phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo);
     bool ok_pencil, ok_chord;
@@ -357,15 +353,6 @@ WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool
     vec2 v = p - s.anchor;
     float phi = ok_chord ? cj_atan2(dot(v, s.perp), dot(v, s.tau)) : phi_try;
     bool ok = ok_pencil || ok_chord;
-    // A false-position cut whose pencil angle leaves the bracket by more than its rounding
-    // hit another piece of the conic: refused, the next cut is the midpoint's.
-    float slack = 32.0 * CJ_EPS * (1.0 + abs(s.anchor.x) + abs(s.anchor.y)) / max(length(v), CJ_TINY);
-    float lo = min(s.phi_lo, s.phi_hi), hi = max(s.phi_lo, s.phi_hi);
-    if (false_position && ok_chord && (phi < lo - slack || phi > hi + slack)) {
-        s.side = CJ_RETRY;
-        s.steps += 1;
-        return s;
-    }
 
     float fm, gm;
     uint stm;

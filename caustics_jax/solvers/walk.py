@@ -79,8 +79,6 @@ __all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_ellipse", 
            "walk_turn_back"]
 
 WALK, BISECT, DONE = 0, 1, 2
-#: `_State.side` after a refused false-position cut: the next cut is the midpoint chord's.
-RETRY = 2
 SCHEDULERS = ("pool", "chunked")
 
 
@@ -133,7 +131,7 @@ class _State(NamedTuple):
     f_hi: jax.Array
     ab_lo: jax.Array  # bracket ends as points (for the chord fallback)
     ab_hi: jax.Array
-    side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none; RETRY: cut at the midpoint)
+    side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
     tir_end: jax.Array  # TIR search: which bracket end is totally reflecting (-1 lo, +1 or 2 hi, 0 none)
     best_ab: jax.Array
     best_f: jax.Array
@@ -478,13 +476,10 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
     """
     denom = s.f_hi - s.f_lo
     lam = 0.5
-    false_position = jnp.asarray(False)
     if illinois:
         frac = -s.f_lo / jnp.where(denom != 0, denom, 1)  # false position, from the lo end
         lam = jnp.where(denom != 0, jnp.clip(frac, 1e-6, 1 - 1e-6), 0.5)
-        # f is 0 at a TIR end: no false position; nor after a false-position cut off the arc.
-        false_position = (denom != 0) & (s.tir_end == 0) & (s.side != RETRY)
-        lam = jnp.where(false_position, lam, 0.5)
+        lam = jnp.where(s.tir_end != 0, 0.5, lam)  # f is 0 at a TIR end: no false position
     phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
     p_pencil, ok_pencil = pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
@@ -495,19 +490,10 @@ def _bisect_geometry(coef, s: _State, illinois: bool):
     p = jnp.where(ok_chord, p_chord, p_pencil)
     v = p - s.anchor
     phi = jnp.where(ok_chord, jnp.arctan2(v @ s.perp, v @ s.tau), phi_try)
-    # A false-position chord cut whose pencil angle leaves the bracket by more than that
-    # angle's rounding (`v` is a difference of points about 1 in size) hit another piece
-    # of the conic: it is refused, and the next cut is the midpoint's (`_bisect_update`).
-    # It had been taken: float64 NOT_CONVERGED on 1 of 1000 planted lanes of a steep pool,
-    # and statuses that depended on the order of each face's vertices (docs/solvers.md).
-    info = jnp.finfo(v.dtype)
-    slack = 32 * info.eps * (1 + jnp.sum(jnp.abs(s.anchor))) / jnp.maximum(jnp.linalg.norm(v), info.tiny)
-    lo, hi = jnp.minimum(s.phi_lo, s.phi_hi), jnp.maximum(s.phi_lo, s.phi_hi)
-    off = false_position & ok_chord & ((phi < lo - slack) | (phi > hi + slack))
-    return p, phi, ok_pencil | ok_chord, off
+    return p, phi, ok_pencil | ok_chord
 
 
-def _bisect_update(s: _State, p, phi, ok, off, fm, stm, tol, illinois: bool) -> _State:
+def _bisect_update(s: _State, p, phi, ok, fm, stm, tol, illinois: bool) -> _State:
     transmits = stm == ObjectiveStatus.OK
     searching = s.tir_end != 0
     # In a search a BACKWARD cut sits on the far side of the onset, as a TIR one does.
@@ -552,7 +538,7 @@ def _bisect_update(s: _State, p, phi, ok, off, fm, stm, tol, illinois: bool) -> 
     status = jnp.where(no_root, jnp.where(tir_end == 1, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
     better = ok & transmits & (jnp.abs(fm) < jnp.abs(s.best_f))
     keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
-    new = s._replace(
+    return s._replace(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32),
         phi_lo=keep(phi_lo, s.phi_lo), phi_hi=keep(phi_hi, s.phi_hi),
         f_lo=keep(f_lo, s.f_lo), f_hi=keep(f_hi, s.f_hi),
@@ -561,9 +547,6 @@ def _bisect_update(s: _State, p, phi, ok, off, fm, stm, tol, illinois: bool) -> 
         best_ab=jnp.where(better | found, p, s.best_ab), best_f=jnp.where(better | found, fm, s.best_f),
         steps=s.steps + 1,
     )
-    # A refused cut (`off`) changes nothing but the step count and the next cut's rule.
-    retry = s._replace(side=jnp.asarray(RETRY, jnp.int32), steps=s.steps + 1)
-    return jax.tree.map(lambda r, n: jnp.where(off, r, n), retry, new)
 
 
 def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
@@ -576,12 +559,12 @@ def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
     V, N, coef = _frame(mesh, jnp.where(walking, g, s.face), P, L)
     walk_geo = _walk_geometry(mesh, coef, g, k_in, t_in, e)
-    p, phi, ok, off = _bisect_geometry(coef, s, illinois)
+    p, phi, ok = _bisect_geometry(coef, s, illinois)
     ab_x = walk_geo[6]
     pts = jnp.where(walking, jnp.stack([e, ab_x]), jnp.stack([p, p]))
     f2, st2, g2 = bracket_objective(V, N, P, L, pts, eta)
     walked = _walk_update(s, g, e, walk_geo, f2, st2, g2, tol)
-    refined = _bisect_update(s, p, phi, ok, off, f2[0], st2[0], tol, illinois)
+    refined = _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
     return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
 
 
@@ -610,9 +593,9 @@ def _walk_branch(mesh, P, L, eta, tol, s: _State) -> _State:
 def _bisect_branch(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     """`_step` for a lane in BISECT mode: only the refinement cut is computed."""
     V, N, coef = _frame(mesh, s.face, P, L)
-    p, phi, ok, off = _bisect_geometry(coef, s, illinois)
+    p, phi, ok = _bisect_geometry(coef, s, illinois)
     f2, st2, _ = bracket_objective(V, N, P, L, jnp.stack([p, p]), eta)
-    return _bisect_update(s, p, phi, ok, off, f2[0], st2[0], tol, illinois)
+    return _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
 
 
 def walk_init(mesh: SurfaceMesh, P, L, face, ab0, found, eta, tol, options: Walk):
