@@ -1,14 +1,20 @@
 """caustics_jax: a JAX testbed for the mathematics of interactive caustics.
 
-The public API is what this module re-exports. float64 is never switched on by importing
-the package: use `precision("float64")` or `enable_x64()`.
+The public API is what this module re-exports (`__all__`): the solvers and their
+options, irradiance and photons, meshes and scenes, and the pure kernels. The modules
+`kernels`, `scenes`, `export` and `testing` are reachable as attributes (`cj.export` is
+imported on first use). float64 is never switched on by importing the package: use
+`precision("float64")` or `enable_x64()`. The sub-packages are the layers of
+docs/map.md "Layers and import graph".
 """
 
+import importlib
+
 from . import kernels, scenes
-from ._precision import enable_x64, precision
 from ._version import __version__
-from .barycentric import barycentric_point, edge_barycentric, interpolated_normal
-from .conic import (
+from .accel.prepared import PreparedSurface, prepare, start_points
+from .math.barycentric import barycentric_point, edge_barycentric, interpolated_normal
+from .math.conic import (
     conic_coefficients,
     conic_tangent,
     conic_value,
@@ -16,24 +22,18 @@ from .conic import (
     solve_quadratic,
     tangent_to_world,
 )
-from .features import SceneFeatures, features
-from .geometry import (
-    fresnel_reflectance,
-    fresnel_transmittance,
-    reflect,
-    refract,
-    safe_normalize,
-)
-from .mesh import SurfaceMesh, cross_edge
-from .objectives import (
+from .math.geometry import fresnel_reflectance, fresnel_transmittance, reflect, refract, safe_normalize
+from .math.objectives import (
     ObjectiveStatus,
     angle_difference_residual,
     half_vector_residual,
     signed_sine,
     signed_sine_and_status,
 )
-from .prepared import PreparedSurface, prepare, start_points
+from .runtime.precision import enable_x64, precision
 from .solvers import Exhaustive, ExhaustiveSolution, Newton, Solution, Status, Trace, Walk, solve
+from .surface.features import SceneFeatures, features
+from .surface.mesh import SurfaceMesh, cross_edge
 from .transport import (
     ReceiverGrid,
     autodiff_D,
@@ -51,56 +51,68 @@ from .transport import (
 )
 
 __all__ = [
-    "Exhaustive",
-    "ExhaustiveSolution",
-    "Newton",
-    "PreparedSurface",
-    "Trace",
-    "sms_biased",
-    "sms_unbiased",
-    "Walk",
     "__version__",
-    "kernels",
-    "prepare",
-    "ReceiverGrid",
-    "SceneFeatures",
-    "Solution",
-    "Status",
-    "SurfaceMesh",
-    "cross_edge",
-    "scenes",
-    "solve",
-    "start_points",
-    "ObjectiveStatus",
     "angle_difference_residual",
     "autodiff_D",
     "barycentric_point",
     "compression_ratio",
     "compression_ratio_exact",
-    "footprint_ellipse",
     "conic_coefficients",
     "conic_tangent",
     "conic_value",
+    "cross_edge",
     "edge_barycentric",
     "edge_intersections",
     "enable_x64",
+    "Exhaustive",
+    "ExhaustiveSolution",
+    "export",
     "features",
+    "footprint_ellipse",
     "fresnel_reflectance",
     "fresnel_transmittance",
     "half_vector_residual",
     "interpolated_normal",
     "irradiance",
+    "kernels",
+    "Newton",
+    "ObjectiveStatus",
     "path_irradiance",
     "photon_differential_irradiance",
     "photon_irradiance",
     "precision",
+    "prepare",
+    "PreparedSurface",
     "ray_differential_D",
+    "ReceiverGrid",
     "reflect",
     "refract",
     "safe_normalize",
+    "SceneFeatures",
+    "scenes",
     "signed_sine",
     "signed_sine_and_status",
+    "sms_biased",
+    "sms_unbiased",
+    "Solution",
+    "solve",
     "solve_quadratic",
+    "start_points",
+    "Status",
+    "SurfaceMesh",
     "tangent_to_world",
+    "testing",
     "texel_jacobian",
+    "Trace",
+    "Walk",
 ]
+
+#: Sub-packages imported on first attribute access: they pull in the exporter and the
+#: oracle, which `import caustics_jax` does not need.
+_LAZY = ("export", "shaders", "testing")
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -25,14 +25,14 @@ from mkdocs.structure.files import File
 # (page, module, title, how): "names" documents each name of __all__, "module" the module.
 API_PAGES = (
     ("caustics_jax", "caustics_jax", "The public API (`import caustics_jax as cj`)", "names"),
-    ("scenes", "caustics_jax.scenes", "Scenes", "module"),
+    ("scenes", "caustics_jax.surface.scenes", "Scenes", "module"),
     ("solvers", "caustics_jax.solvers", "Solvers", "names"),
     ("transport", "caustics_jax.transport", "Transport: D factor, irradiance, photons", "names"),
     ("kernels", "caustics_jax.kernels", "Real-time pipeline kernels", "names"),
     ("export", "caustics_jax.export", "Shader reference data", "names"),
     ("testing", "caustics_jax.testing", "Testing: the numpy float64 oracle and planted paths", "names"),
-    ("compare", "caustics_jax.compare", "The solver comparison job", "module"),
-    ("progress", "caustics_jax.progress", "Progress bars", "module"),
+    ("compare", "caustics_jax.app.compare", "The solver comparison job", "module"),
+    ("progress", "caustics_jax.runtime.progress", "Progress bars", "module"),
 )
 PAGE_OF_MODULE = {module: page for page, module, _, _ in API_PAGES}
 

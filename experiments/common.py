@@ -18,8 +18,7 @@ import time
 import jax
 import numpy as np
 
-from caustics_jax.reporting import log as log
-from caustics_jax.reporting import stats as stats
+from caustics_jax.app.reporting import log
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 

@@ -15,7 +15,7 @@
 # option set is traced first (the second reuses traces of nested functions).
 # Statuses must agree lane for lane, points within float rounding: reported.
 #
-# The walk's slot pool alone ("scheduler" rows): `lanes.run_pools` on the walk's real lane
+# The walk's slot pool alone ("scheduler" rows): `pools.run_pools` on the walk's real lane
 # states and its real step counts (from the walk's own solve, crossings then refinement
 # steps), with steps that only count, so that only the scheduler's data movement (refill
 # gathers, write-back scatters, queues) is timed, under both option sets.
@@ -41,9 +41,10 @@ jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from caustics_jax import Newton, Walk, compare, prepare, solve  # noqa: E402
-from caustics_jax.compilation import XLA_OPTIONS, using_xla_options  # noqa: E402
-from caustics_jax.lanes import pool_slots, run_pools  # noqa: E402
+from caustics_jax import Newton, Walk, prepare, solve  # noqa: E402
+from caustics_jax.app import compare  # noqa: E402
+from caustics_jax.runtime.compilation import XLA_OPTIONS, using_xla_options  # noqa: E402
+from caustics_jax.runtime.pools import pool_slots, run_pools  # noqa: E402
 from caustics_jax.solvers.walk import BISECT, DONE, WALK, walk_init, walk_turn_back  # noqa: E402
 from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
 

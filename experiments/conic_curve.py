@@ -6,7 +6,7 @@
 # (`caustics_jax.solve`) really travel along it from the start point `M0 = PL ∩ surface`
 # to the refraction point `M`?
 #
-# The curve is traced by the library, in float64: `caustics_jax.arcs.trace_arcs` cuts each
+# The curve is traced by the library, in float64: `caustics_jax.curve.arcs.trace_arcs` cuts each
 # face's conic by its edges (seed 001 eq. 22-24) and samples every arc inside the face
 # through the pencil of lines through its start root (`arcs.face_arcs`, `FaceArcs.point`),
 # vmapped over all faces: the same parametrisation the walk refines on and the exhaustive
@@ -32,9 +32,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import caustics_jax as cj
-from caustics_jax.arcs import N_ARCS, root_between, trace_arcs
-from caustics_jax.objectives import ObjectiveStatus, bracket_objective
-from caustics_jax.scenes import wavy_pool
+from caustics_jax.curve.arcs import N_ARCS, root_between, trace_arcs
+from caustics_jax.math.objectives import ObjectiveStatus, bracket_objective
+from caustics_jax.surface.scenes import wavy_pool
 from caustics_jax.testing import oracle
 from experiments.common import figures_dir, log, use_agg, write_json
 
@@ -266,7 +266,7 @@ def run() -> tuple[dict, dict]:
             L=L,
             eta=ETA,
             dtype="float64",
-            tracer="caustics_jax.arcs.trace_arcs",
+            tracer="caustics_jax.curve.arcs.trace_arcs",
             samples_per_arc=SAMPLES,
             M0=M0,
             M0_face=f0,
@@ -429,7 +429,7 @@ def plot(d, out, path=FIG):
     ax.set_title(
         f"Top view: coplanarity curve on a wavy water surface (seed 001 Fig. 3)\n"
         f"{out['triangles']} triangles, |z| <= {SCENE['amplitude']:g} m, float64, eta = {ETA}\n"
-        f"curve traced by caustics_jax.arcs.trace_arcs, across {out['faces_on_curve']} faces",
+        f"curve traced by caustics_jax.curve.arcs.trace_arcs, across {out['faces_on_curve']} faces",
         fontsize=10.5,
     )
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=2, fontsize=8, frameon=False)

@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 
 import caustics_jax as cj  # noqa: E402
 from caustics_jax import scenes  # noqa: E402
-from caustics_jax.lanes import padded_mesh  # noqa: E402
+from caustics_jax.accel.prepared import padded_mesh  # noqa: E402
 from caustics_jax.solvers import exhaustive  # noqa: E402
 from experiments.common import figures_dir, median_time, parse_args, write_json  # noqa: E402
 from experiments.estimators import POOLS, pool  # noqa: E402

@@ -31,8 +31,8 @@ jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built 
 
 import numpy as np  # noqa: E402
 
-from caustics_jax import features, scenes  # noqa: E402
 from caustics_jax.solvers import Status, solve  # noqa: E402
+from caustics_jax.surface import features, scenes  # noqa: E402
 from caustics_jax.testing import partly_covered_floor  # noqa: E402
 from caustics_jax.transport import irradiance  # noqa: E402
 from experiments.common import ROOT, use_agg, write_json  # noqa: E402

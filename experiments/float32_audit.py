@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import caustics_jax as cj  # noqa: E402
-from caustics_jax.conic import edge_intersection_points  # noqa: E402
+from caustics_jax.math.conic import edge_intersection_points  # noqa: E402
 from caustics_jax.testing import oracle, planted_paths  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

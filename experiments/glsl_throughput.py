@@ -56,7 +56,7 @@ def jax_pipeline(manifest, buffers):
     float32-rounded vertices need not pass."""
     import dataclasses
 
-    from caustics_jax.mesh import GridInfo
+    from caustics_jax.surface.mesh import GridInfo
 
     v, f, lanes = buffers["vertices"], buffers["faces"], buffers["lanes"]
     g = manifest["grid"]

@@ -34,7 +34,13 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from caustics_jax import barycentric_point, interpolated_normal, refract, safe_normalize, scenes  # noqa: E402
+from caustics_jax import (  # noqa: E402
+    barycentric_point,
+    interpolated_normal,
+    refract,
+    safe_normalize,
+    scenes,  # noqa: E402
+)
 from caustics_jax.solvers import solve  # noqa: E402
 from caustics_jax.testing import flat_interface_irradiance  # noqa: E402
 from caustics_jax.transport import (  # noqa: E402

@@ -43,7 +43,7 @@ results: dict = {}
 # ## 1. Schlick-like Fresnel (seed 004 eq. 14) against exact Fresnel, air -> water
 #
 # `F_frac = ((eta - 1)/(eta + 1))^2 = 0.0204`, `F_exp = 5` (Schlick's values; the paper
-# leaves both free). Exact: unpolarised dielectric Fresnel from `caustics_jax.geometry`.
+# leaves both free). Exact: unpolarised dielectric Fresnel from `caustics_jax.math.geometry`.
 
 # %%
 theta_deg = np.linspace(0, 90, 90001)

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 import caustics_jax as cj
-from caustics_jax import compare
+from caustics_jax.app import compare
 from experiments.common import figures_dir, log, parse_args, write_json
 
 SCENES = ("wavy", "wavy_jittered")

@@ -1,7 +1,7 @@
 # %% [markdown]
 # # Scaling with tessellation (seed 001 Fig. 10-12 analogue)
 #
-# How do the curve walk and the optimistix Newton baselines of `caustics_jax/compare.py`
+# How do the curve walk and the optimistix Newton baselines of `caustics_jax/app/compare.py`
 # scale with the triangle count of the water surface? Newton converging inside every
 # triangle (`newton-hv`: Newton, half-vector constraint) and Newton stepping as Cycles'
 # MNEE and Mitsuba's SMS do (`newton-hv-step`: one step, then re-project onto the
@@ -29,8 +29,8 @@ import jax
 import numpy as np
 
 import caustics_jax as cj
-from caustics_jax.compare import CONFIGS
-from caustics_jax.progress import progress
+from caustics_jax.app.compare import CONFIGS
+from caustics_jax.runtime.progress import progress
 from experiments.common import ROOT, log, median_time, parse_args, use_agg, write_json
 
 use_agg()

@@ -1,7 +1,7 @@
 # %% [markdown]
 # # Stress suite: every kernel and solver on adversarial configurations
 #
-# Issue 7, part 1. Each category of `caustics_jax.stress` (grazing light, near total
+# Issue 7, part 1. Each category of `caustics_jax.testing.stress` (grazing light, near total
 # internal reflection, sliver triangles, constant normals, vertices and edges, `P` next
 # to the surface, far light, scales 1e-3 and 1e4, a large mesh) plants refracted paths on
 # a surface; every kernel is evaluated at the planted point and every solver is run
@@ -34,13 +34,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import caustics_jax as cj
-from caustics_jax import stress
-from caustics_jax.compare import CONFIGS, MAX_REFERENCE_FACES
-from caustics_jax.conic import conic_value
-from caustics_jax.progress import progress
-from caustics_jax.solvers import Status
-from caustics_jax.solvers.walk import default_tol
-from caustics_jax.testing import oracle
+from caustics_jax.app.compare import CONFIGS, MAX_REFERENCE_FACES
+from caustics_jax.math.conic import conic_value
+from caustics_jax.runtime.progress import progress
+from caustics_jax.solvers import Status, default_tol
+from caustics_jax.testing import oracle, stress
 from experiments.common import ROOT, log, parse_args, stats, use_agg, write_json
 
 use_agg()

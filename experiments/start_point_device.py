@@ -27,12 +27,12 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from caustics_jax.barycentric import barycentric_point  # noqa: E402
-from caustics_jax.bvh import build_bvh  # noqa: E402
-from caustics_jax.occlusion import segment_blocked  # noqa: E402
-from caustics_jax.prepared import prepare  # noqa: E402
-from caustics_jax.scenes import wavy_pool  # noqa: E402
-from caustics_jax.start_points import start_points  # noqa: E402
+from caustics_jax.accel.bvh import build_bvh  # noqa: E402
+from caustics_jax.accel.occlusion import segment_blocked  # noqa: E402
+from caustics_jax.accel.prepared import prepare  # noqa: E402
+from caustics_jax.accel.start_points import start_points  # noqa: E402
+from caustics_jax.math.barycentric import barycentric_point  # noqa: E402
+from caustics_jax.surface.scenes import wavy_pool  # noqa: E402
 from caustics_jax.testing.meshes import jittered_grid  # noqa: E402
 from experiments.common import ROOT, write_json  # noqa: E402
 

@@ -39,12 +39,12 @@ import jax
 import numpy as np
 
 import caustics_jax as cj
-from caustics_jax.barycentric import barycentric_point
-from caustics_jax.bvh import build_bvh
-from caustics_jax.mesh import SurfaceMesh
-from caustics_jax.prepared import prepare
-from caustics_jax.scenes import flat_pool, lagoon, wavy_pool
-from caustics_jax.start_points import build_accel, start_points
+from caustics_jax.accel.bvh import build_bvh
+from caustics_jax.accel.prepared import prepare
+from caustics_jax.accel.start_points import build_accel, start_points
+from caustics_jax.math.barycentric import barycentric_point
+from caustics_jax.surface.mesh import SurfaceMesh
+from caustics_jax.surface.scenes import flat_pool, lagoon, wavy_pool
 from caustics_jax.testing.meshes import jittered_grid
 from experiments.common import ROOT, parse_args, use_agg, write_json
 
@@ -223,7 +223,7 @@ def flat_gain() -> list:
 # %%
 _BUILD_1M = """
 import time, json, jax
-import caustics_jax.scenes as S
+import caustics_jax.surface.scenes as S
 
 def vm(key):  # this process's own high-water mark (ru_maxrss survives exec from the parent)
     for line in open("/proc/self/status"):

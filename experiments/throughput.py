@@ -22,7 +22,7 @@
 #   needs (its first triangle, its own steps), **executed** FLOPs what the schedule makes
 #   the machine do (every lane's ellipse samples under the chunked scheduler, each chunk
 #   until its slowest lane, the pool's idle slots while it drains: the pool's loop trips
-#   are replayed on the host from the lanes' step counts, exactly as `lanes.run_pool`
+#   are replayed on the host from the lanes' step counts, exactly as `pools.run_pool`
 #   refills its slots);
 # - the machine's practical peak: a jitted element-wise fused multiply-add loop in the
 #   same process, per dtype.
@@ -50,8 +50,10 @@ jax.config.update("jax_enable_x64", True)  # float32 arrays stay float32 (built 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from caustics_jax import Newton, Walk, compare, prepare, solve  # noqa: E402
-from caustics_jax.lanes import lanes_per_block, pool_slots  # noqa: E402
+from caustics_jax import Newton, Walk, prepare, solve  # noqa: E402
+from caustics_jax.app import compare  # noqa: E402
+from caustics_jax.runtime.blocks import lanes_per_block  # noqa: E402
+from caustics_jax.runtime.pools import pool_slots  # noqa: E402
 from caustics_jax.solvers.newton import newton_init, newton_iteration  # noqa: E402
 from caustics_jax.solvers.walk import BISECT, WALK, walk_advance, walk_ellipse, walk_init  # noqa: E402
 from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
@@ -146,7 +148,7 @@ def lane_flops(solver, mesh, P, L, start, eta: float = 1.333) -> dict:
 
 
 def pool_trips(phases: np.ndarray, slots: int) -> np.ndarray:
-    """Loop trips of `lanes.run_pools`, replayed: `phases` `(lanes, K)` holds how many steps
+    """Loop trips of `pools.run_pools`, replayed: `phases` `(lanes, K)` holds how many steps
     each lane needs in pool 0, then pool 1, ... (in queue order; a lane visits the pools
     in that order). Each trip steps every pool with a busy slot; a lane whose phase ends
     is queued for its next pool; free slots refill from their pool's queue. Returns the
@@ -225,7 +227,7 @@ def executed_and_useful(solver, flops: dict | None, sol, ellipse: np.ndarray, bl
             executed += block * flops["init_full"] + WIDTH * s.reshape(-1, WIDTH).max(1).sum() * flops["step"]
             continue
         trips = pool_trips(ph, pool_slots())
-        if walk:  # first triangles and ellipses on the compacted lanes (`lanes.map_where`); two pools
+        if walk:  # first triangles and ellipses on the compacted lanes (`pools.map_where`); two pools
             executed += -(-int(f.sum()) // WIDTH) * WIDTH * flops["init"]
             executed += -(-int(e.sum()) // WIDTH) * WIDTH * flops["init_full"]
             executed += pool_slots() * (trips[0] * flops["step_walk"] + trips[1] * flops["step_bisect"])

@@ -14,7 +14,7 @@
 # %% [markdown]
 # # Solver comparison: the walk, every Newton variant and the exhaustive reference
 #
-# Every solver configuration that `caustics_jax.compare.CONFIGS` offers when this notebook
+# Every solver configuration that `caustics_jax.app.compare.CONFIGS` offers when this notebook
 # runs (the curve walk of seed 001, the optimistix Newton/MNEE/SMS variants, and whatever
 # later solvers register there) on five scenes:
 #
@@ -29,7 +29,7 @@
 # For each: success against the exhaustive float64 reference (`method="exhaustive"`),
 # error against time (the Pareto sweep over acceptance tolerances), iterations, the
 # failure statuses, and where on the floor each solver fails. The numbers come from
-# `caustics_jax.compare.run`, the job behind `caustics-jax compare` (docs/solvers.md).
+# `caustics_jax.app.compare.run`, the job behind `caustics-jax compare` (docs/solvers.md).
 #
 # Timings are wall-clock on whatever machine runs the notebook (batched, CPU unless a GPU
 # is present); compare them within one run only. `CAUSTICS_JAX_QUICK=1` (what CI runs)
@@ -49,7 +49,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import NullFormatter
 
 import caustics_jax as cj
-from caustics_jax import compare
+from caustics_jax.app import compare
 
 QUICK = os.environ.get("CAUSTICS_JAX_QUICK", "") not in ("", "0")
 N = 1024 if QUICK else 4096          # receiver lanes per scene

@@ -38,6 +38,6 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
     yield
-    from caustics_jax.compilation import release_compiled_programs  # (after x64 is on, above)
+    from caustics_jax.runtime.compilation import release_compiled_programs  # (after x64 is on, above)
 
     release_compiled_programs(0.5)

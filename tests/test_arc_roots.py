@@ -1,4 +1,4 @@
-"""The certified arc root finder (`caustics_jax.arc_roots`): Bernstein arithmetic, the
+"""The certified arc root finder (`caustics_jax.curve.arc_roots`): Bernstein arithmetic, the
 rounding bound of `G`'s coefficients, and root isolation."""
 
 from fractions import Fraction
@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from caustics_jax import SurfaceMesh, solve
-from caustics_jax.arc_roots import (
+from caustics_jax.curve.arc_roots import (
     arc_polynomial,
     bernstein_product,
     bernstein_split,
@@ -16,7 +16,7 @@ from caustics_jax.arc_roots import (
     isolate_roots,
     piece_homogeneous,
 )
-from caustics_jax.conic import conic_coefficients
+from caustics_jax.math.conic import conic_coefficients
 from caustics_jax.testing import planted_paths
 
 ETA = 1.333

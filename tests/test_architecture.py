@@ -16,6 +16,7 @@ import re
 import subprocess
 import sys
 import tomllib
+import types
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "caustics_jax"
@@ -43,6 +44,80 @@ def test_no_module_imports_a_private_name_of_another_module():
     offenders = [f"{m.path.relative_to(ROOT)}:{line}: {name} of {target}"
                  for m in MODULES.values() for line, target, name in m.private]
     assert offenders == []
+
+
+def test_every_import_points_down_the_layers():
+    """docs/map.md "Layers": a module imports its own unit and lower layers only (runtime at
+    the bottom, the public API on top), imports inside functions included."""
+    assert import_graph.layer_violations(MODULES) == []
+    units = {import_graph.unit(n) for n in MODULES}
+    assert {"runtime", "math", "curve", "surface", "accel", "solvers", "transport", "kernels", "testing",
+            "export", "shaders", "app", ""} <= units
+
+
+def test_the_layer_check_fails_on_an_upward_import_in_a_planted_package(tmp_path):
+    """An import from a low layer into a higher one (no cycle anywhere), one between two
+    units of one layer, and a unit with no layer are each reported."""
+    pkg = tmp_path / "pkg"
+    for sub in ("math", "solvers", "curve", "surface", "extra"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("from .solvers import walk\n")
+    (pkg / "math" / "conic.py").write_text("def f():\n    from ..solvers.walk import g\n    return g\n")
+    (pkg / "solvers" / "walk.py").write_text("def g():\n    return 1\n")
+    (pkg / "curve" / "arcs.py").write_text("from ..surface import mesh\n")
+    (pkg / "surface" / "mesh.py").write_text("")
+    (pkg / "extra" / "x.py").write_text("from ..math import conic\n")
+    modules = import_graph.build(pkg)
+    assert import_graph.find_cycles(modules) == []
+    problems = import_graph.layer_violations(modules)
+    assert problems == ["pkg.curve.arcs:1: imports pkg.surface.mesh ('surface' is not below 'curve')",
+                        "pkg.extra.x:1: unit 'extra' has no layer",
+                        "pkg.math.conic:2: imports pkg.solvers.walk ('solvers' is not below 'math')"]
+
+
+def test_the_package_root_holds_at_most_eight_modules():
+    """The layers are folders: the root keeps the public API and a few modules at most."""
+    root = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert len(root) <= 8, root
+
+
+def test_no_public_name_of_a_package_hides_one_of_its_modules():
+    """`cj.start_points` is a function and `caustics_jax.start_points` no module: a package's
+    attribute named like one of its submodules must be that submodule (STYLE.md)."""
+    import importlib
+
+    hidden = []
+    for name, mod in MODULES.items():
+        if not mod.is_package:
+            continue
+        package = importlib.import_module(name)
+        for sub in (p.stem for p in mod.path.parent.glob("*.py") if p.stem != "__init__"):
+            obj = getattr(package, sub, None)
+            if obj is not None and not (isinstance(obj, types.ModuleType) and obj.__name__ == f"{name}.{sub}"):
+                hidden.append(f"{name}.{sub}")
+        for sub in (p.parent.name for p in mod.path.parent.glob("*/__init__.py")):
+            obj = getattr(package, sub, None)
+            if obj is not None and not isinstance(obj, types.ModuleType):
+                hidden.append(f"{name}.{sub}")
+    assert hidden == []
+
+
+def test_the_package_source_holds_no_dated_notes():
+    """Comments state contracts; measurements and their dates live in docs/ (STYLE.md)."""
+    dated = re.compile(r"\b20[0-9]{2}-[0-9]{2}-[0-9]{2}\b")
+    hits = [f"{p.relative_to(ROOT)}:{i}" for p in sorted(PACKAGE.rglob("*.py"))
+            for i, line in enumerate(p.read_text().splitlines(), 1) if dated.search(line)]
+    assert hits == []
+
+
+def test_the_public_api_is_a_sorted_flat_list():
+    """`caustics_jax.__all__` is sorted, without duplicates, and every name resolves."""
+    import caustics_jax
+
+    names = list(caustics_jax.__all__)
+    assert names == sorted(names, key=str.lower) and len(set(names)) == len(names)
+    assert all(hasattr(caustics_jax, n) for n in names)
 
 
 def test_the_checker_finds_a_cycle_and_private_imports_in_a_planted_package(tmp_path):

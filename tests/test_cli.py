@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from caustics_jax import cli
-from caustics_jax.compare import CompareConfig, ratios
+from caustics_jax.app import cli
+from caustics_jax.app.compare import CompareConfig, ratios
 
 
 def test_compare_writes_a_table_json_and_figure_consistent_with_the_reference(tmp_path, capsys):

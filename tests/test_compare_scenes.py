@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from caustics_jax import __version__, cli, compare
+from caustics_jax import __version__
+from caustics_jax.app import cli, compare
 
 
 def _ripple_obj(path, n=16, size=4.0):

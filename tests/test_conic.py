@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from caustics_jax import conic_coefficients, conic_tangent, edge_intersections
-from caustics_jax.conic import (
+from caustics_jax.math.conic import (
     conic_matrix,
     conic_second_intersection,
     conic_value,
@@ -352,7 +352,7 @@ def test_a_root_at_a_vertex_belongs_to_both_edges_and_the_window_is_64_eps(dtype
 def test_power_of_two_floor_is_exact_over_the_whole_normal_range(dtype):
     """solve_quadratic's exact scale (bit mask, not frexp/ldexp): `p <= x < 2 p` with `p` a
     power of two, for x from the smallest normal number to the largest; 0 below."""
-    from caustics_jax.conic import power_of_two_floor
+    from caustics_jax.math.conic import power_of_two_floor
 
     info = np.finfo(dtype)
     rng = np.random.default_rng(3)

@@ -14,13 +14,16 @@ import pytest
 import caustics_jax as cj
 import caustics_jax.kernels as K
 import caustics_jax.transport as T
-from caustics_jax import arguments, compare, occlusion, scenes
-from caustics_jax.bvh import first_hit_bvh
-from caustics_jax.face_cells import bin_faces, first_hit_cells
+from caustics_jax import scenes
+from caustics_jax.accel import occlusion
+from caustics_jax.accel.bvh import first_hit_bvh
+from caustics_jax.accel.face_cells import bin_faces, first_hit_cells
+from caustics_jax.app import compare
+from caustics_jax.runtime import arguments
 from caustics_jax.solvers import _solve
 from caustics_jax.transport.visibility import path_visible
 
-start_points_module = importlib.import_module("caustics_jax.start_points")  # (cj.start_points is the function)
+start_points_module = importlib.import_module("caustics_jax.accel.start_points")  # (cj.start_points is the function)
 
 # --------------------------------------------------------------------------- kernels
 # One example per public kernel, arrays integer-valued where the kernel takes float data, so
@@ -736,8 +739,8 @@ def _mesh_entry_points() -> dict[str, object]:
     """Every public function (of the package, `transport`, `start_points`, `occlusion`,
     `bvh`, `face_cells`) that takes a surface mesh as `mesh` or `surface`, by name."""
     found = {}
-    for name in ("caustics_jax", "caustics_jax.transport", "caustics_jax.start_points", "caustics_jax.occlusion",
-                 "caustics_jax.bvh", "caustics_jax.face_cells"):
+    for name in ("caustics_jax", "caustics_jax.transport", "caustics_jax.accel.start_points",
+                 "caustics_jax.accel.occlusion", "caustics_jax.accel.bvh", "caustics_jax.accel.face_cells"):
         module = importlib.import_module(name)
         for attr in module.__all__:
             fn = getattr(module, attr)

@@ -1,6 +1,6 @@
 """Lanes spread over every local device: two host devices give the per-lane results of one.
 
-The two-device run happens in a subprocess (`lanes.use_cpu_devices(2)`, what
+The two-device run happens in a subprocess (`blocks.use_cpu_devices(2)`, what
 `caustics-jax compare --cpu-devices` calls, must run before JAX starts); it writes its
 results to an .npz that this process compares, array for array, with the same solves on
 its single device. The subprocess uses blocks of 256 lanes per device
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 N_LANES = 600
 RUNS = {  # name -> (method options, irradiance?)
     "walk": ({"method": "walk"}, False),
-    "newton": ({"method": "newton"}, False),  # optimistix: one program per device (lanes.on_devices)
+    "newton": ({"method": "newton"}, False),  # optimistix: one program per device (blocks.on_devices)
     "newton_one_step": ({"method": "newton", "stepping": "one_step"}, False),
     "irradiance": ({"method": "walk"}, True),
 }
@@ -39,7 +39,7 @@ SCRIPT = textwrap.dedent("""
     import jax
     import numpy as np
     import caustics_jax as cj
-    from caustics_jax.lanes import lanes_per_block, use_cpu_devices
+    from caustics_jax.runtime.blocks import lanes_per_block, use_cpu_devices
     assert use_cpu_devices(2) == 2
     sys.path.insert(0, {tests!r})
     from test_devices import PAIRS, scene, run
@@ -96,7 +96,7 @@ def test_two_host_devices_give_the_lanes_of_one(two_devices, name, dtype):
 def test_use_cpu_devices_refuses_bad_counts_and_a_started_backend():
     import jax
 
-    from caustics_jax.lanes import use_cpu_devices
+    from caustics_jax.runtime.blocks import use_cpu_devices
 
     have = len(jax.devices("cpu"))  # this process's backend is running
     assert use_cpu_devices(have) == have  # the count it already has: accepted

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from caustics_jax import scenes, solve
+from caustics_jax.accel.start_points import start_points
 from caustics_jax.solvers import Solution
 from caustics_jax.solvers.exhaustive import ExhaustiveSolution
-from caustics_jax.start_points import start_points
 from caustics_jax.testing import assert_solution_sane as _sane
 from caustics_jax.testing import jittered_heightfield, oracle, planted_mesh_paths, refraction_angle_error
 

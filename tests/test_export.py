@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from caustics_jax import cli
 from caustics_jax import export as ex
+from caustics_jax.app import cli
 from caustics_jax.testing.oracle import refract as _refract_np
 
 COUNT = 32

@@ -1,4 +1,4 @@
-"""Scene features (`caustics_jax.features`): the flags, and that `features="auto"` gives the
+"""Scene features (`caustics_jax.surface.features`): the flags, and that `features="auto"` gives the
 same statuses, points and irradiance as the general path (`features=None`).
 
 Every scene here has 256 receivers and a 512-face surface, so the general and the
@@ -12,9 +12,9 @@ import pytest
 
 import caustics_jax as cj
 from caustics_jax import scenes
-from caustics_jax.features import SceneFeatures, features
-from caustics_jax.lanes import lanes_per_block
+from caustics_jax.runtime.blocks import lanes_per_block
 from caustics_jax.solvers import Status, _solve, solve
+from caustics_jax.surface.features import SceneFeatures, features
 from caustics_jax.testing import flat_interface_irradiance, partly_covered_floor
 from caustics_jax.transport import irradiance
 
@@ -155,7 +155,7 @@ def test_flat_closed_form_matches_the_independent_flat_interface_reference(dtype
 
 def test_lanes_that_need_no_solve_never_enter_the_solver(monkeypatch):
     """The walk steps only lanes with a start point, and none on a flat pool: lanes come in
-    one fixed-size block (`lanes.lanes_per_block`), the others marked not found, which the
+    one fixed-size block (`blocks.lanes_per_block`), the others marked not found, which the
     pool scheduler never steps (`walk._walk_pool` maps only the found lanes)."""
     seen = []
     solve_walk = _solve.solve_walk

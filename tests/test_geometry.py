@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from caustics_jax import fresnel_reflectance, fresnel_transmittance, reflect, refract, safe_normalize
-from caustics_jax.geometry import safe_sqrt
+from caustics_jax.math.geometry import safe_sqrt
 from caustics_jax.testing import oracle
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -176,7 +176,7 @@ def test_refraction_k_beyond_physical_ratios_is_tir_or_one_never_nan(dtype):
     (float64 eta = 1e30: a lane transmitted) or overflowed float32 (`inf - inf`: NaN eagerly,
     +inf under jit, every oblique ray transmitted). Compared with the oracle's sign in
     float64 (exact there for these values), and 1 exactly at normal incidence."""
-    from caustics_jax.geometry import refraction_k
+    from caustics_jax.math.geometry import refraction_k
     from caustics_jax.testing.oracle import refraction_discriminant
     cos = np.array([-1.0, -0.999, -0.8, -0.3, 0.0, 0.5, 1.0])
     for eta in (16.0, 1e3, 1e19, 1e30, 3e38 if dtype == jnp.float32 else 1e300):
@@ -201,7 +201,7 @@ def test_signed_sine_at_an_unphysical_eta_is_total_internal_reflection_not_a_roo
     """float32 signed_sine at eta = 1e30 had returned f = 0 with status OK on every record
     (refract's k was +inf under jit); float64 on one record in 107."""
     from caustics_jax.export import KERNELS
-    from caustics_jax.objectives import ObjectiveStatus, signed_sine_and_status
+    from caustics_jax.math.objectives import ObjectiveStatus, signed_sine_and_status
     x, _ = KERNELS["signed_sine"].generate(np.random.default_rng(0), 32)
     for dtype in (jnp.float32, jnp.float64):
         args = [jnp.asarray(x[k], dtype) for k in ("V", "N", "P", "L", "ab")]
@@ -216,7 +216,7 @@ def test_signed_sine_at_an_unphysical_eta_is_total_internal_reflection_not_a_roo
 def test_refraction_k_derivative_beyond_physical_ratios_is_exact_at_normal_incidence():
     """d k / d cos = 2 eta^2 cos: the large-eta form had used a sqrt, whose derivative at
     |cos| = 1 is cut to 0 (0 instead of -800 at eta = 20)."""
-    from caustics_jax.geometry import refraction_k
+    from caustics_jax.math.geometry import refraction_k
     for dtype in (jnp.float32, jnp.float64):
         for eta in (1.333, 20.0, 1e3):
             for cos in (-1.0, -0.6, 1.0):

@@ -10,10 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from caustics_jax import barycentric_point
-from caustics_jax.grid import detect_grid, grid_layout
-from caustics_jax.mesh import GridInfo, SurfaceMesh
-from caustics_jax.scenes import lagoon, wavy_pool
-from caustics_jax.start_points import start_points
+from caustics_jax.accel.start_points import start_points
+from caustics_jax.surface.grid import detect_grid, grid_layout
+from caustics_jax.surface.mesh import GridInfo, SurfaceMesh
+from caustics_jax.surface.scenes import lagoon, wavy_pool
 
 NX, NY = 7, 5  # fixed sizes: one compile per dtype for the whole module
 DTYPES = [jnp.float32, jnp.float64]

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import caustics_jax as cj
 from caustics_jax import scenes
-from caustics_jax.mesh import SurfaceMesh
+from caustics_jax.surface.mesh import SurfaceMesh
 
 DTYPES = ["float32", "float64"]
 N_SIDE = 16  # receivers per side: 256 lanes per example

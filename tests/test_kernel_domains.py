@@ -14,7 +14,7 @@ import pytest
 
 import caustics_jax as cj
 import caustics_jax.kernels as K
-from caustics_jax.conic import EDGE_TOL_MAX
+from caustics_jax.math.conic import EDGE_TOL_MAX
 
 DTYPES = [jnp.float32, jnp.float64]
 _Z = np.array([0.0, 0.0, 1.0])
@@ -267,7 +267,7 @@ def test_inside_jit_a_negative_or_fractional_level_has_no_scale():
 
 
 # --------------------------------------------------------------------------- one domain check
-# Every declared domain, on arrays and parameters alike, goes through `_precision.check_domain`
+# Every declared domain, on arrays and parameters alike, goes through `kernel_contract.check_domain`
 # (the kernels' own range checks, which named no kernel, are gone). In the kernel's dtype a
 # declared value must fit, and a positive one must be a normal number: float32 `refract` had
 # run with eta = 1e-40 (flushed to zero by XLA) and eta = 1e39 (inf, T = 0) without a word.

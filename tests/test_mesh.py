@@ -9,8 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from caustics_jax import barycentric_point
-from caustics_jax.mesh import GridInfo, SurfaceMesh, cross_edge
-from caustics_jax.scenes import flat_pool, lagoon, wavy_pool
+from caustics_jax.surface.mesh import GridInfo, SurfaceMesh, cross_edge
+from caustics_jax.surface.scenes import flat_pool, lagoon, wavy_pool
 
 DTYPES = [jnp.float32, jnp.float64]
 # |world point before - after| / scene size for cross_edge on the wavy pool and lagoon,
@@ -97,7 +97,7 @@ def test_cross_edge_transfers_the_same_world_point_and_back(dtype, seed):
     t = jnp.asarray(rng.uniform(0, 1, n), dtype)
     g, m, t_next, ab_next = jax.jit(cross_edge)(mesh, face, edge, t)
     assert t_next.dtype == dtype and ab_next.dtype == dtype
-    from caustics_jax.barycentric import edge_barycentric
+    from caustics_jax.math.barycentric import edge_barycentric
 
     V, _ = mesh.triangle(face)
     before = barycentric_point(V, edge_barycentric(edge, t))
@@ -278,7 +278,7 @@ def test_shape_errors_and_bad_grid_are_rejected():
     (dict(normal_weighting="x"), "normal_weighting must be one of"),
     (dict(dtype="float16"), "dtype must be float32 or float64"),
     (dict(dtype="x"), "dtype must be float32 or float64"),
-    (dict(grid="x"), "grid must be None or a caustics_jax.mesh.GridInfo"),
+    (dict(grid="x"), "grid must be None or a caustics_jax.surface.mesh.GridInfo"),
 ])
 def test_bad_from_arrays_arguments_are_value_errors_naming_them(kwargs, match):
     args = dict(vertices=_SQUARE_V, faces=_SQUARE_F) | kwargs

@@ -52,7 +52,7 @@ def test_every_objective_vanishes_at_planted_solutions(dtype, seed, eta):
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_refracted_direction_is_w_L_at_planted_solutions(dtype):
     """`refracted_direction` = `refract(-w_P, -n_s, eta)` (seed 001 eq. 19) equals `w_L` on a path."""
-    from caustics_jax.objectives import refracted_direction
+    from caustics_jax.math.objectives import refracted_direction
 
     p = planted_paths(19, 256)
     r = np.asarray(refracted_direction(*_cast(p, dtype), p.eta))
@@ -165,7 +165,7 @@ def test_tangent_orientation_degenerates_with_constant_normals_while_plane_does_
     stays of order one, and the "plane" f changes sign across the solution.
     """
     from caustics_jax import conic_tangent, refract, tangent_to_world
-    from caustics_jax.objectives import path_vectors
+    from caustics_jax.math.objectives import path_vectors
 
     p = planted_paths(31, 512, normal_spread=0.0)
     assert np.allclose(p.N, p.N[:, :1])  # constant normals: a line, not a conic
@@ -251,7 +251,7 @@ def test_a_receiver_mirrored_beyond_the_shading_plane_is_backward_not_a_root(dty
     ray and `f = 0` again: a spurious root with `P` outside the medium. `bracket_objective`
     (what every solver brackets and accepts) reports BACKWARD there; the plain signed sine
     still vanishes (it only describes the formula)."""
-    from caustics_jax.objectives import bracket_objective
+    from caustics_jax.math.objectives import bracket_objective
 
     p = planted_paths(37, 256)
     n_s = oracle.shading_normal(p.N, p.ab)

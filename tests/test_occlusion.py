@@ -6,10 +6,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from caustics_jax.bvh import build_bvh
-from caustics_jax.occlusion import segment_blocked
-from caustics_jax.prepared import prepare
-from caustics_jax.scenes import wavy_pool
+from caustics_jax.accel.bvh import build_bvh
+from caustics_jax.accel.occlusion import segment_blocked
+from caustics_jax.accel.prepared import prepare
+from caustics_jax.surface.scenes import wavy_pool
 from caustics_jax.testing.meshes import jittered_grid
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -207,7 +207,7 @@ def test_a_nan_segment_crosses_nothing_and_path_visible_refuses_it():
     """One NaN row had kept the cell and BVH traversals looping forever
     (`first_crossing`, `path_visible`); inside jit such a lane now crosses nothing, and
     `path_visible` refuses it at the boundary."""
-    from caustics_jax.start_points import first_crossing
+    from caustics_jax.accel.start_points import first_crossing
     from caustics_jax.transport.visibility import path_visible
 
     pool = wavy_pool(512, dtype="float32").surface

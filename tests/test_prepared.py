@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from caustics_jax import barycentric_point, solve
-from caustics_jax.bvh import FaceBVH
-from caustics_jax.face_cells import FaceCells
-from caustics_jax.mesh import SurfaceMesh
-from caustics_jax.prepared import prepare
-from caustics_jax.scenes import lagoon, wavy_pool
-from caustics_jax.start_points import start_points
+from caustics_jax.accel.bvh import FaceBVH
+from caustics_jax.accel.face_cells import FaceCells
+from caustics_jax.accel.prepared import prepare
+from caustics_jax.accel.start_points import start_points
+from caustics_jax.surface.mesh import SurfaceMesh
+from caustics_jax.surface.scenes import lagoon, wavy_pool
 from caustics_jax.testing.meshes import fan, jittered_grid
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -110,7 +110,7 @@ def test_the_local_origin_moves_a_far_mesh_exactly(dtype):
 def test_a_grid_mesh_moves_with_its_grid_and_a_grid_off_its_vertices_is_not_trusted():
     import equinox as eqx
 
-    from caustics_jax.frames import grid_state
+    from caustics_jax.surface.frames import grid_state
 
     sc = wavy_pool(512, dtype="float32")
     pool = sc.surface
@@ -215,7 +215,7 @@ def test_every_entry_point_answers_a_far_scene_in_the_callers_frame():
 def test_far_surfaces_check_their_start_point_inputs_and_moved_grids_do_not_warn():
     import warnings
 
-    from caustics_jax.frames import grid_state
+    from caustics_jax.surface.frames import grid_state
 
     pool = wavy_pool(512, dtype="float32").surface
     far = pool.translated((3e3, -3e3, 0.0))
@@ -237,16 +237,16 @@ def test_far_surfaces_check_their_start_point_inputs_and_moved_grids_do_not_warn
 
 
 def test_public_start_points_build_the_structure_once_per_mesh(monkeypatch):
-    """`caustics_jax.start_points` (and `transport.surface_hits`) keep `prepare(mesh)`'s structure: a second call on the
-    same mesh builds nothing on the host (it had rebuilt the jittered mesh's bins on every
-    call, 150 ms at 32k triangles), and gives what a structure built for the call gives. A
+    """`caustics_jax.start_points` (and `transport.surface_hits`) keep `prepare(mesh)`'s
+    structure: a second call on the same mesh builds nothing on the host (it had rebuilt the
+    jittered mesh's bins on every call, 150 ms at 32k triangles), and gives what a structure built for the call gives. A
     mesh holding numpy arrays, which can change in place, still builds one per call."""
     import jax
 
     import caustics_jax as cj
-    import caustics_jax.prepared as prepared_module
+    import caustics_jax.accel.prepared as prepared_module
 
-    start_points_module = importlib.import_module("caustics_jax.start_points")  # (cj.start_points: the function)
+    start_points_module = importlib.import_module("caustics_jax.accel.start_points")  # (cj.start_points: the function)
     built = []
     real = start_points_module.build_accel
     for module in (prepared_module, start_points_module):  # (prepared imports it by name)
@@ -273,7 +273,7 @@ def test_public_start_points_build_the_structure_once_per_mesh(monkeypatch):
 
 
 def test_public_start_points_first_called_inside_jit_keep_no_tracers():
-    """A mesh closed over by a user's `jit`: the first `caustics_jax.start_points` (and
+    """A mesh closed over by a user's `jit`: the first `caustics_jax.accel.start_points` (and
     `surface_hits`) call prepares it inside the trace. The kept analysis is computed
     eagerly, so later calls outside `jit` work (traced arrays kept in the cache would
     leak into them)."""

@@ -1,11 +1,11 @@
-"""`caustics_jax.progress`: bars on a terminal only, forced on or off by CAUSTICS_JAX_PROGRESS."""
+"""`caustics_jax.runtime.progress`: bars on a terminal only, forced on or off by CAUSTICS_JAX_PROGRESS."""
 
 import io
 import sys
 
 import pytest
 
-from caustics_jax import progress as prog
+from caustics_jax.runtime import progress as prog
 
 
 class _Terminal(io.StringIO):

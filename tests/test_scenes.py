@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from caustics_jax import scenes
-from caustics_jax.mesh import SurfaceMesh
-from caustics_jax.scenes import flat_pool, lagoon, wavy_pool
+from caustics_jax.surface.mesh import SurfaceMesh
+from caustics_jax.surface.scenes import flat_pool, lagoon, wavy_pool
 
 GENERATORS = {
     "flat_pool": lambda n, seed, **kw: flat_pool(n, seed=seed, receiver_jitter=0.5, **kw),

@@ -1,4 +1,4 @@
-"""Lane scheduling (`caustics_jax.lanes`): the slot pool against the chunked scheduler,
+"""Lane scheduling (`caustics_jax.runtime.lanes`): the slot pool against the chunked scheduler,
 compaction of rare work, fixed-size blocks (one compile whatever the lane count), and the
 persistent compilation cache's settings.
 
@@ -13,8 +13,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from caustics_jax import Newton, Walk, compilation, scenes, solve
-from caustics_jax.lanes import map_where, run_blocks, run_pool, run_pools
+from caustics_jax import Newton, Walk, scenes, solve
+from caustics_jax.runtime import compilation
+from caustics_jax.runtime.blocks import run_blocks
+from caustics_jax.runtime.pools import map_where, run_pool, run_pools
 from caustics_jax.testing import assert_same_lanes
 
 DTYPES = ["float32", "float64"]
@@ -39,7 +41,7 @@ def test_slot_pool_gives_the_lanes_of_the_chunked_scheduler(solver, dtype):
     """Same per-lane iteration, another schedule: statuses, iteration counts and crossings
     are identical, points and residuals within rounding of the program's vector code
     (`assert_same_lanes`; the pool's 256 slots vmap the step at the chunks' width,
-    `lanes.pool_slots`)."""
+    `pools.pool_slots`)."""
     mesh, P, L = _pool(dtype)
     assert len(P) == 4096
     pool = solve(mesh, P, L, method=SOLVERS[solver](scheduler="pool"))
@@ -155,10 +157,11 @@ def test_map_where_without_out_gives_zeros_elsewhere_and_traces_fn_once():
     assert calls == [(), ()]  # once under map_where's jit, once for `want` above
 
 
-def test_run_pools_after_equals_a_per_lane_loop():
-    """Two pools with `after`: each lane sees `after(steps[k](state))` until it is done, as
-    in a per-lane loop that branches on its route (the walk's crossing and refinement pools
-    and its turn-back). Lanes hop between pools; `after` resets `x` once per lane."""
+def test_run_pools_equals_a_per_lane_loop():
+    """Two pools: each lane sees `steps[k](state)` for the pool `k` it is routed to until it
+    is done, as in a per-lane loop that branches on its route (the walk's crossing and
+    refinement pools). Lanes hop between pools; a step resets `x` once per lane (as the
+    walk's turn-back does), so the route depends on the lane's whole history."""
     rng = np.random.default_rng(3)
     n = 240
     state = {"x": jnp.asarray(rng.integers(0, 7, n), jnp.int32), "k": jnp.zeros(n, jnp.int32),
@@ -168,20 +171,18 @@ def test_run_pools_after_equals_a_per_lane_loop():
     def route(c):  # pool by the parity of x; -1 when done
         return jnp.where(c["k"] < c["n"], c["x"] % 2, -1).astype(jnp.int32)
 
-    steps = (lambda c: {**c, "x": c["x"] + 1, "k": c["k"] + 1, "f": c["f"] * 2},
-             lambda c: {**c, "x": c["x"] + 3, "k": c["k"] + 1, "f": c["f"] - 1})
-
-    def after(c):  # once per lane, when x passes 9: back to 0 (a turn-back)
+    def reset(c):  # once per lane, when x passes 9: back to 0
         hit = (c["x"] > 9) & ~c["reset"]
         return {**c, "x": jnp.where(hit, 0, c["x"]), "reset": c["reset"] | hit}
 
+    steps = (lambda c: reset({**c, "x": c["x"] + 1, "k": c["k"] + 1, "f": c["f"] * 2}),
+             lambda c: reset({**c, "x": c["x"] + 3, "k": c["k"] + 1, "f": c["f"] - 1}))
+
     def alone(c):
-        def body(c):
-            return after(jax.lax.switch(route(c), steps, c))
-        return jax.lax.while_loop(lambda c: route(c) >= 0, body, c)
+        return jax.lax.while_loop(lambda c: route(c) >= 0, lambda c: jax.lax.switch(route(c), steps, c), c)
 
     want = jax.vmap(alone)(state)
-    got = jax.jit(lambda s: run_pools(steps, route, s, 16, after=after))(state)
+    got = jax.jit(lambda s: run_pools(steps, route, s, 16))(state)
     assert np.any(np.asarray(want["reset"])) and not np.all(np.asarray(want["reset"]))
     for key in state:
         np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), err_msg=key)
@@ -273,11 +274,11 @@ def test_xla_options_are_passed_to_cpu_programs_only():
 
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="the options are XLA:CPU's")
 def test_the_project_xla_options_reach_every_block_program():
-    """The block programs (`lanes.on_devices`) compile with `compilation.xla_options()`: an
+    """The block programs (`blocks.on_devices`) compile with `compilation.xla_options()`: an
     option XLA does not know fails their compile, so the options are passed; the project's
     own options are accepted by the installed XLA and give the results of XLA's defaults;
     leaving `using_xla_options` restores the options in force."""
-    from caustics_jax.lanes import on_devices
+    from caustics_jax.runtime.blocks import on_devices
 
     def block(scale, x, static):
         return jnp.sin(x) * scale + static

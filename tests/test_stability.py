@@ -1,5 +1,5 @@
 """Fast subset of the stress suite (experiments/stability.py): adversarial planted paths
-from `caustics_jax.stress`, every kernel and the walk and Newton solvers, float32 and
+from `caustics_jax.testing.stress`, every kernel and the walk and Newton solvers, float32 and
 float64: no NaN/Inf for finite input, and no silent failure (a lane reported FOUND whose
 residual or refraction-angle error is above what the tolerance allows).
 
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import caustics_jax as cj
-from caustics_jax import scenes, stress
+from caustics_jax import scenes
 from caustics_jax.solvers import Status, default_tol
-from caustics_jax.testing import oracle
+from caustics_jax.testing import oracle, stress
 
 DTYPES = ["float32", "float64"]
 CATEGORIES = [c for c in stress.CATEGORIES if c != "large"]

@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 
 import caustics_jax as cj
 from caustics_jax import barycentric_point
-from caustics_jax.mesh import SurfaceMesh
-from caustics_jax.scenes import flat_pool, lagoon, wavy_pool
-from caustics_jax.start_points import build_bvh, start_points
+from caustics_jax.accel.start_points import build_bvh, start_points
+from caustics_jax.surface.mesh import SurfaceMesh
+from caustics_jax.surface.scenes import flat_pool, lagoon, wavy_pool
 from caustics_jax.testing import oracle
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -311,7 +311,7 @@ def test_a_lane_gets_the_same_start_point_alone_in_any_batch_and_on_every_path(d
 def test_triangle_crossing_from_a_face_frame_table_equals_the_one_from_vertices(dtype):
     """The cell traversal gathers `face_frames` computed once per call; the test must give
     what the vertices give (same fields), hits and misses alike."""
-    from caustics_jax.crossing import face_frames, triangle_crossing
+    from caustics_jax.math.crossing import face_frames, triangle_crossing
 
     rng = np.random.default_rng(3)
     V = rng.normal(size=(512, 3, 3)).astype(dtype)
@@ -332,7 +332,7 @@ def test_long_cell_lists_continue_in_extra_rows_and_lose_no_face(dtype, monkeypa
     rest continue in chained rows. Each cell's chain lists the faces of the single-row
     table, and vertical and oblique segments through the vertices of those cells (where
     the valence is highest) find the BVH's crossings."""
-    import caustics_jax.face_cells as fc
+    import caustics_jax.accel.face_cells as fc
 
     mesh = lagoon(4000, seed=0, dtype=dtype).surface
     cells = fc.bin_faces(mesh)
@@ -368,10 +368,10 @@ def test_long_cell_lists_continue_in_extra_rows_and_lose_no_face(dtype, monkeypa
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("name, accel", [("steep_wavy", "own"), ("lagoon", "own"), ("gentle_wavy", "bvh")])
 def test_solves_block_program_finds_the_start_points_of_start_points(name, accel, dtype):
-    """`solve` finds each block's start points in a block program (`lanes.on_devices`,
+    """`solve` finds each block's start points in a block program (`blocks.on_devices`,
     compiled with the project's XLA options): the same crossings as `start_points` on grid
     cells, binned cells and a BVH, and the options reach that program."""
-    from caustics_jax import compilation
+    from caustics_jax.runtime import compilation
     from caustics_jax.solvers._solve import _block_start_points
 
     scene = SCENES[name]

@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from caustics_jax.arcs import N_ARCS, trace_arcs
-from caustics_jax.scenes import wavy_pool
+from caustics_jax.curve.arcs import N_ARCS, trace_arcs
+from caustics_jax.surface.scenes import wavy_pool
 from caustics_jax.testing import oracle
 
 SAMPLES = 32

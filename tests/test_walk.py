@@ -76,7 +76,7 @@ def test_walk_on_random_waves_never_reports_a_bad_point(dtype, seed, amplitude, 
 
 def _ellipse_cases(n_max=48):
     """Single triangles whose conic is an ellipse inside them, with a planted solution."""
-    from caustics_jax.conic import conic_coefficients, edge_intersections
+    from caustics_jax.math.conic import conic_coefficients, edge_intersections
 
     p = planted_paths(5, 4000, normal_spread=1.0)
     coef = conic_coefficients(*(jnp.asarray(x) for x in (p.V, p.N, p.P, p.L)))
@@ -105,7 +105,7 @@ def test_ellipse_inside_the_first_triangle_is_solved():
     err = refraction_angle_error(mesh, np.asarray(sol.triangle)[found],
                                  np.asarray(sol.barycentric)[found], P[found], L[found], 1.333)
     assert np.all(err < 1e-5)
-    # The pool scheduler samples the ellipse only for these lanes (`lanes.map_where`); the
+    # The pool scheduler samples the ellipse only for these lanes (`pools.map_where`); the
     # chunked one for every lane: the same lanes either way.
     chunked = solve(mesh, P, L, scheduler="chunked")
     assert_same_lanes(sol, chunked, ("status", "point", "iterations", "crossed"))

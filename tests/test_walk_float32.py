@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 import caustics_jax as cj
-from caustics_jax import compare
+from caustics_jax.app import compare
+from caustics_jax.surface.mesh import GridInfo
 from caustics_jax.testing import refraction_angle_error
 
 
@@ -30,7 +31,7 @@ def sine_surface(dtype, scale=1.0, shift=(0.0, 0.0, 0.0)):
     X, Y = np.meshgrid(x, x, indexing="xy")
     H = 0.05 * np.sin(2 * X) * np.cos(1.5 * Y)
     V = np.stack([X.ravel(), Y.ravel(), H.ravel()], -1) * scale + np.asarray(shift)
-    faces = cj.mesh.GridInfo(nx=10, ny=10, x0=-2, y0=-2, dx=0.4, dy=0.4).faces()
+    faces = GridInfo(nx=10, ny=10, x0=-2, y0=-2, dx=0.4, dy=0.4).faces()
     return cj.SurfaceMesh.from_arrays(V, faces, dtype=dtype)
 
 

@@ -6,8 +6,11 @@ with the first paragraph of each module's docstring (what it is for).
 Exits non-zero, after naming the offenders on stderr, when the graph has a cycle or when a
 module imports a private name (leading underscore, not a dunder) of another module, either
 as `from X import _name` or as an attribute `X._name` of an imported module. Private
-*modules* (`_precision.py`, `solvers/_solve.py`) are the optimistix layout and may be
-imported; their private names may not.
+*modules* (`_version.py`, `solvers/_solve.py`) are the optimistix layout and may be
+imported; their private names may not. It also exits non-zero when an import points up the
+layer order `LAYERS` (docs/map.md "Layers"): each module belongs to the top-level unit of
+the package it sits in (`caustics_jax.math.conic` to `math`), and may import its own unit
+and units of lower layers only.
 
 Run from the repository root: `python tools/import_graph.py [--root caustics_jax]`.
 `tests/test_architecture.py` loads this file and checks the same rules.
@@ -39,6 +42,26 @@ class Module:
     external: list[tuple[int, str, bool]] = field(default_factory=list)
     #: first paragraph of the module docstring, on one line ("" without one)
     summary: str = ""
+
+
+#: The package's layers, bottom first (docs/map.md "Layers"). A unit is a sub-package or a
+#: root module of the package; "" is the package's own `__init__` (the public API, on top).
+#: A module may import its own unit and the units of lower layers; units of one layer are
+#: independent of each other. `scenes` is the root name of `surface.scenes` (`cj.scenes`).
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("_version", "runtime"),
+    ("math",),
+    ("curve", "surface"),
+    ("accel",),
+    ("solvers",),
+    ("transport", "kernels"),
+    ("testing",),
+    ("export",),
+    ("shaders",),
+    ("app",),
+    ("scenes",),
+    ("",),
+)
 
 
 def is_private(name: str) -> bool:
@@ -169,6 +192,27 @@ def find_cycles(modules: dict[str, Module]) -> list[list[str]]:
     return out
 
 
+def unit(name: str) -> str:
+    """The top-level unit of a dotted module name: `pkg.math.conic` -> `math`, `pkg` -> ""."""
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def layer_violations(modules: dict[str, Module], layers=LAYERS) -> list[str]:
+    """`module:line: imports target` for every import that does not point down `layers`
+    (into the importer's own unit or a lower layer), and for every unit `layers` lacks."""
+    rank = {u: i for i, layer in enumerate(layers) for u in layer}
+    out = []
+    for name, mod in sorted(modules.items()):
+        for target, line in sorted(mod.imports.items()):
+            a, b = unit(name), unit(target)
+            if a not in rank or b not in rank:
+                out.append(f"{name}:{line}: unit {(a if a not in rank else b)!r} has no layer")
+            elif a != b and rank[b] >= rank[a]:
+                out.append(f"{name}:{line}: imports {target} ({b!r} is not below {a!r})")
+    return out
+
+
 def build(package_dir: pathlib.Path = ROOT / "caustics_jax") -> dict[str, Module]:
     """Discover and analyse the package at `package_dir`."""
     modules = discover(package_dir)
@@ -221,6 +265,9 @@ def main(argv=None) -> int:
     status = 0
     for comp in find_cycles(modules):
         print(f"import cycle: {' <-> '.join(comp)}", file=sys.stderr)
+        status = 1
+    for problem in layer_violations(modules):
+        print(f"layer order: {problem}", file=sys.stderr)
         status = 1
     for mod in modules.values():
         for line, target, name in mod.private:

@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import testing
-from .._precision import precision
-from ..barycentric import barycentric_point
+from ..math.barycentric import barycentric_point
+from ..runtime.precision import precision
 
 
 def f64(fn, *args):

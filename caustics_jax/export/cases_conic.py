@@ -7,7 +7,13 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..conic import conic_coefficients, conic_tangent, edge_intersections, edge_quadratics, solve_quadratic
+from ..math.conic import (
+    conic_coefficients,
+    conic_tangent,
+    edge_intersections,
+    edge_quadratics,
+    solve_quadratic,
+)
 from .cases import f64, planted, random_paths, split, stack_cases, unit
 from .records import CASES
 from .registry import register

@@ -16,9 +16,9 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from .. import scenes
-from .._precision import precision
-from ..mesh import cross_edge
+from ..runtime.precision import precision
+from ..surface import scenes
+from ..surface.mesh import cross_edge
 from .cases import split, stack_cases
 from .records import CASES
 from .registry import register

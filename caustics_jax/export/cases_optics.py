@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import fresnel_reflectance, refract, refraction_k
-from ..objectives import path_vectors
+from ..math.geometry import fresnel_reflectance, refract, refraction_k
+from ..math.objectives import path_vectors
 from .cases import f64, planted, split, stack_cases, unit
 from .records import CASES
 from .registry import register

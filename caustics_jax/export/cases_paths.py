@@ -8,8 +8,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..geometry import refract, refraction_k, safe_normalize
-from ..objectives import path_vectors, signed_sine_and_status
+from ..math.geometry import refract, refraction_k, safe_normalize
+from ..math.objectives import path_vectors, signed_sine_and_status
 from ..transport.differentials import ray_differential_D
 from ..transport.photon_differentials import compression_ratio
 from .cases import adversarial_paths, f64, path_inputs, planted, random_paths, split, stack_cases, unit

@@ -13,9 +13,20 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..kernels.attenuation import fresnel_reflect_approx, fresnel_refract_approx, intensity_attenuation, ray_intensity
+from ..kernels.attenuation import (
+    fresnel_reflect_approx,
+    fresnel_refract_approx,
+    intensity_attenuation,
+    ray_intensity,
+)
 from ..kernels.cascades import cascade_deltas, cascade_dispatch, cascade_thread_counts
-from ..kernels.sprites import sprite_basis, sprite_corners, sprite_foreshortening, sprite_intensity, sprite_size
+from ..kernels.sprites import (
+    sprite_basis,
+    sprite_corners,
+    sprite_foreshortening,
+    sprite_intensity,
+    sprite_size,
+)
 from .cases import split, stack_cases, unit
 from .records import CASES
 from .registry import register

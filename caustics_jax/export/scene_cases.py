@@ -1,5 +1,5 @@
 """The exported scenes (docs/export.md "Scenes"): pools, the lagoon, a jittered mesh, lanes
-that cross no surface, and the stress categories of `caustics_jax.stress`.
+that cross no surface, and the stress categories of `caustics_jax.testing.stress`.
 
 Surfaces come from the package's generators (`scenes.flat_pool`, `wavy_pool`, `lagoon`,
 `stress.stress_case`); the lanes are receivers on the floor under random point lights,
@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
-from .. import scenes
-from .._precision import precision
-from ..stress import stress_case
+from ..runtime.precision import precision
+from ..surface import scenes
+from ..testing.stress import stress_case
 from .records import CASES
 from .scene_registry import SceneData, register_scene
 

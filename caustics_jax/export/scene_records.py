@@ -20,7 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .records import CASE_FIELD, FORMAT_VERSION, Field, c_struct, layout, pack_records, read_records, record_fields
+from .records import (
+    CASE_FIELD,
+    FORMAT_VERSION,
+    Field,
+    c_struct,
+    layout,
+    pack_records,
+    read_records,
+    record_fields,
+)
 
 #: Byte alignment of each buffer within a scene file.
 BUFFER_ALIGNMENT = 256

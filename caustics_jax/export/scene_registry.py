@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..mesh import GridInfo
+from ..surface.mesh import GridInfo
 
 
 @dataclasses.dataclass(frozen=True)

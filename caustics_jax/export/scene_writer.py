@@ -27,15 +27,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._precision import precision
-from ..arcs import project_to_conic
-from ..arguments import check_int
-from ..conic import conic_coefficients, conic_tangent, edge_quadratics, tangent_to_world
-from ..crossing import triangle_crossing
-from ..mesh import SurfaceMesh
-from ..objectives import ObjectiveStatus, bracket_objective
-from ..prepared import prepare
+from ..accel.prepared import prepare
+from ..curve.arcs import project_to_conic
+from ..math.conic import conic_coefficients, conic_tangent, edge_quadratics, tangent_to_world
+from ..math.crossing import triangle_crossing
+from ..math.objectives import ObjectiveStatus, bracket_objective
+from ..runtime.arguments import check_int
+from ..runtime.precision import precision
 from ..solvers import Status, Walk, solve
+from ..surface.mesh import SurfaceMesh
 from ..testing.oracle import NumpyMesh, refraction_angle_error, refraction_rounding_bound
 from ..transport.contribution import path_irradiance
 from ..transport.differentials import ray_differential_D
@@ -113,11 +113,10 @@ def _ties_agree(mesh, P, L, start, status, eta, walk) -> np.ndarray:
     within both tolerances of the start's `s` (`crossing.triangle_crossing`, float32 as the
     testbed's). At a shared edge or vertex the face is a tie that a port breaks its own way
     (its traversal, its tolerance: the GLSL start point takes the lowest `s` at a fixed
-    16 eps), and the walk from the next face may end otherwise: a probe of vertical
-    segments through vertices and edge midpoints of the wavy pool (48 lanes, 24 with a
-    different start face in the port) found 3 lanes FOUND from the testbed's face and
-    LEFT_MESH from the port's. The JAX walk from the port's face ends as the port does on
-    2 of them; the third flips with one ulp of the start point, hence the nudges."""
+    16 eps), and the walk from the next face may end otherwise (FOUND from the testbed's
+    face, LEFT_MESH from the port's). The JAX walk from the port's face mostly ends as the
+    port does, but a lane can also flip with one ulp of the start point, hence the nudges
+    (docs/export.md, "Measurements behind the code")."""
     faces = np.asarray(mesh.faces)
     face0, found = np.asarray(start.face), np.asarray(start.found)
     lanes = np.flatnonzero(found)
@@ -269,8 +268,8 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
                                                np.float32)
     # Nor one whose conic contains an edge of its start triangle to float32 resolution (a
     # line conic along a grid line of a flat pool): that edge's quadratic is rounding noise,
-    # and so is the root the walk reads on it (measured: XLA's fused multiply-adds and a
-    # port's separate ones put it at t = 0.68 and 0.80 on the same edge).
+    # and so is the root the walk reads on it (XLA's fused multiply-adds and a port's
+    # separate ones put it far apart on the same edge: docs/export.md "Scenes").
     with precision("float64"):
         V0, N0 = mesh64.triangle(jnp.asarray(np.maximum(np.asarray(start.face), 0)))
         coef0 = conic_coefficients(V0, N0, P64, L64)
@@ -320,7 +319,7 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
 
     err_D, err_E = rel_err(D, np.asarray(D64)), rel_err(E, np.asarray(E64))
     statuses = np.asarray(sol.status)
-    from .. import __version__
+    from .._version import __version__
 
     manifest = {
         "scene": spec.name,

@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._precision import precision
-from ..arguments import MAX_INT32, check_int
-from ..progress import progress
+from ..runtime.arguments import MAX_INT32, check_int
+from ..runtime.precision import precision
+from ..runtime.progress import progress
 from .cases import split
 from .records import CASES, FORMAT_VERSION, c_header, layout, pack_records, record_fields
 from .registry import KERNELS, Kernel
@@ -81,7 +81,7 @@ def export_kernel(kernel: Kernel, count: int, seed: int, audit: dict | None = No
         else:
             tolerance[f.name] = {"exact": True}
     _, stride = layout(kernel.fields)
-    from .. import __version__
+    from .._version import __version__
 
     manifest = {
         "kernel": kernel.name,

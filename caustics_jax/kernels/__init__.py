@@ -44,20 +44,9 @@ from .collection import (
     reuse_weight,
     temporal_ema,
 )
-from .fixed_point import (
-    FixedPointSum,
-    fixed_point_accumulate,
-    fixed_point_decode,
-    fixed_point_encode,
-)
+from .fixed_point import FixedPointSum, fixed_point_accumulate, fixed_point_decode, fixed_point_encode
 from .projection import projected_photon_position, ray_plane_intersection
-from .sprites import (
-    sprite_basis,
-    sprite_corners,
-    sprite_foreshortening,
-    sprite_intensity,
-    sprite_size,
-)
+from .sprites import sprite_basis, sprite_corners, sprite_foreshortening, sprite_intensity, sprite_size
 
 __all__ = [
     "C_SCENE_FACTOR",

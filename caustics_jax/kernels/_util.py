@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arguments import check_int, check_real
+from ..runtime.arguments import check_int, check_real
 
 
 def float_dtype(*xs):

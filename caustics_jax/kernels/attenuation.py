@@ -2,7 +2,7 @@
 
 Eq. 14 is Schlick's approximation with a free base fraction `F_frac` and exponent
 `F_exp`; with `F_frac = ((eta - 1)/(eta + 1))^2` and `F_exp = 5` it is Schlick's own.
-Its error against the exact Fresnel term (`caustics_jax.geometry.fresnel_reflectance`)
+Its error against the exact Fresnel term (`caustics_jax.math.geometry.fresnel_reflectance`)
 is measured in `experiments/kernel_approximations.py`.
 """
 
@@ -11,9 +11,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._precision import float_inputs
-from ..arguments import check_real
-from ..geometry import dot
+from ..math.geometry import dot
+from ..runtime.arguments import check_real
+from ..runtime.kernel_contract import float_inputs
 from ._util import as_float, check_last_axis, float_dtype, tiny
 
 #: Focus bias of eq. 13 ("experimentally defined constant set to 0.95").
@@ -46,7 +46,7 @@ def schlick_f0(eta):
     `F_frac` of seed 004 eq. 14, which leaves it free (module docstring).
 
     A Python float for a Python number (a static constant, e.g. for `f_frac`), else an
-    array by the kernels' input contract (`_precision.float_inputs`).
+    array by the kernels' input contract (`kernel_contract.float_inputs`).
     """
     if isinstance(eta, int | float) and not isinstance(eta, bool):
         eta = check_real("eta", eta, 0, lo_open=True)

@@ -17,8 +17,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from .._precision import float_inputs
-from ..geometry import dot
+from ..math.geometry import dot
+from ..runtime.kernel_contract import float_inputs
 from ._util import as_float, check_last_axis, float_dtype, ratio_scale, static_int, tiny
 
 #: Eq. 25's constant (default). Alg. 4 line 7 prints 0.144 instead.
@@ -151,7 +151,7 @@ def denoise_subpass(
     w = jnp.where(active, bilateral_weight(depth, z_q, pos, pos_q, delta, eps), 0)
     # Weights reach 1 / eps: for a tiny eps, 31 of them overflow the sums (inf / inf). The
     # filter is a ratio, so dividing every weight (the centre's 1 too) by the largest
-    # changes nothing else; with eps >= 1 (Alg. 4) that divisor is 1, exactly as before.
+    # changes nothing else; with eps >= 1 (Alg. 4) that divisor is 1: Alg. 4's weights exactly.
     m = jax.lax.stop_gradient(jnp.maximum(1, jnp.max(w, axis=0)))
     w = w / m
     total = C / m[..., None] + jnp.sum(w[..., None] * C_q, axis=0)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._precision import float_inputs, in_domain
+from ..runtime.kernel_contract import float_inputs, in_domain
 from ._util import as_float, check_last_axis, concrete, float_dtype, safe_div, static_int, static_real
 
 #: Largest thread id of a dispatch: the GLSL port's `int tid` (and Alg. 1's arithmetic) is 32-bit.

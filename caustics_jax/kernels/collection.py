@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._precision import float_inputs
-from ..geometry import dot, safe_normalize, safe_sqrt
+from ..math.geometry import dot, safe_normalize, safe_sqrt
+from ..runtime.kernel_contract import float_inputs
 from ._util import as_float, check_last_axis, float_dtype, ratio_scale, safe_div, tan_half
 
 #: Search radius cap of seed 000 §3.2 (5 mm, scene units in metres).

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, UInt32
 
-from .._precision import check_domain, float_inputs
+from ..runtime.kernel_contract import check_domain, float_inputs
 from ._util import static_int
 
 FRACTION_BITS = 28

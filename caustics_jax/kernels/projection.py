@@ -11,8 +11,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from .._precision import float_inputs
-from ..geometry import dot, safe_sqrt
+from ..math.geometry import dot, safe_sqrt
+from ..runtime.kernel_contract import float_inputs
 from ._util import check_last_axis, float_dtype, ratio_scale, safe_div
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._precision import float_inputs
-from ..geometry import dot, safe_normalize
+from ..math.geometry import dot, safe_normalize
+from ..runtime.kernel_contract import float_inputs
 from ._util import as_float, check_last_axis, float_dtype, safe_div, static_int, static_real, tiny
 
 #: Eq. 19's epsilon ("a small offset value"); the paper gives no number.

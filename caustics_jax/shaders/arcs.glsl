@@ -1,5 +1,5 @@
 // Arcs of the coplanarity conic inside one triangle (seed 001 §3.4.3-3.4.4, MATH.md §2-3;
-// caustics_jax/arcs.py): the pencil of lines through a curve point parametrises the curve by
+// caustics_jax/curve/arcs.py): the pencil of lines through a curve point parametrises the curve by
 // the line's angle phi, measured from the travel direction tau towards perp; orientation
 // picks perp's sense so that the curve ahead has phi in (0, pi), increasing along it, and the
 // first edge crossing ahead is the edge root of smallest phi (settles seed 001 Fig. 5c).

@@ -1,5 +1,5 @@
 // Helpers shared by the kernel ports and the scene shader (the walk): GLSL 450 versions of
-// caustics_jax/geometry.py, barycentric.py, conic.py, objectives.py and
+// caustics_jax/math/geometry.py, barycentric.py, conic.py, objectives.py and
 // transport/differentials.py. Each formula exists once in GLSL too: a kernel file holds
 // only its cj_run. Every function mirrors the Python kernel line by line, so a difference
 // in a conformance run points at one line.

@@ -28,15 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import export as ex
-from .vulkan import (
-    LOCAL_SIZE,
-    SHADER_DIR,
-    Unavailable,
-    build_host,
-    compile_shader,
-    glsl_struct,
-    run_host,
-)
+from .vulkan import LOCAL_SIZE, SHADER_DIR, Unavailable, build_host, compile_shader, glsl_struct, run_host
 
 
 def shader_source(kernel_name: str, shader_dir: Path | None = None) -> str:

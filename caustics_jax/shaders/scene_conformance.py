@@ -34,10 +34,10 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from .._precision import precision
 from ..export import scene_records as sr
-from ..mesh import SurfaceMesh
+from ..runtime.precision import precision
 from ..solvers import Status
+from ..surface.mesh import SurfaceMesh
 from ..testing.oracle import NumpyMesh, refraction_angle_error, refraction_rounding_bound
 from ..transport.contribution import path_irradiance
 from ..transport.differentials import ray_differential_D

@@ -16,19 +16,19 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
-from ..arguments import check_fits, check_points, check_scene_scale, check_tol_resolves
-from ..compilation import enable_compilation_cache
-from ..features import GENERAL, SceneFeatures
-from ..features import check as check_features
-from ..lanes import lane_mesh, on_devices, run_blocks
-from ..mesh import SurfaceMesh
-from ..prepared import PreparedSurface, prepare
-from ..start_points import StartPoint, first_crossing
+from ..accel.prepared import PreparedSurface, prepare
+from ..accel.start_points import StartPoint, first_crossing
+from ..runtime.arguments import check_eta, check_fits, check_points, check_scene_scale, check_tol_resolves
+from ..runtime.blocks import lane_mesh, on_devices, run_blocks
+from ..runtime.compilation import enable_compilation_cache
+from ..surface.features import GENERAL, SceneFeatures
+from ..surface.features import check as check_features
+from ..surface.mesh import SurfaceMesh
 from ._solution import Solution, Status
 from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
 from .flat import flat_root, flat_solution
 from .newton import Newton, solve_newton
-from .options import SolverOptions, check_eta
+from .options import SolverOptions
 from .sides import warn_if_wrong_sides
 from .solution_set import translated
 from .trace import Trace, solve_trace, with_solutions
@@ -50,7 +50,7 @@ def solver_from(method, options: dict) -> SolverOptions:
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {tuple(METHODS)} or a solver object "
                          f"(caustics_jax.Walk, Newton, Exhaustive), got {method!r}")
-    return METHODS[method].from_kwargs(**options)
+    return METHODS[method](**options)
 
 
 def check_lanes(mesh: SurfaceMesh, P, L, origin=None):
@@ -88,7 +88,7 @@ def check_start(start, n: int, dtype, n_faces: int | None = None) -> StartPoint 
         face, ab, found = start
     except (TypeError, ValueError):
         raise ValueError("start must be a StartPoint or a tuple (face (N,), barycentric (N, 2), "
-                         "found (N,)) from caustics_jax.start_points") from None
+                         "found (N,)) from caustics_jax.accel.start_points") from None
     face, ab, found = np.asarray(face), np.asarray(ab), np.asarray(found)
     if face.shape != (n,) or ab.shape != (n, 2) or found.shape != (n,):
         raise ValueError(f"start must hold face ({n},), barycentric ({n}, 2) and found ({n},) for the "
@@ -181,10 +181,10 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
             asks for every solution per lane.
 
     Walk and Newton run the lanes in fixed-size blocks spread over every local device
-    (`lanes.run_blocks`, `lanes.on_devices`) on the mesh padded to power-of-two sizes:
+    (`blocks.run_blocks`, `blocks.on_devices`) on the mesh padded to power-of-two sizes:
     jit compiles once per method, dtype and mesh size class, whatever `N`, and JAX's
     persistent compilation cache keeps the programs between processes
-    (`caustics_jax.compilation`; `CAUSTICS_JAX_COMPILATION_CACHE=0` turns it off).
+    (`caustics_jax.runtime.compilation`; `CAUSTICS_JAX_COMPILATION_CACHE=0` turns it off).
 
     A mesh far from the coordinate origin is solved about its centre
     (`frames.local_origin`: `P`, `L` and the mesh moved by `-origin` in float64, exactly
@@ -244,7 +244,7 @@ def solve_local(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333
 
 
 # --------------------------------------------------------------------------- blocks of lanes
-# Walk and Newton see lanes only in blocks of `lanes.lanes_per_block()` (the last one padded
+# Walk and Newton see lanes only in blocks of `blocks.lanes_per_block()` (the last one padded
 # with lanes that need no work), split over every local device: one compile per method,
 # dtype and mesh size class, whatever the lane count (docs/solvers.md "Batching").
 
@@ -310,7 +310,7 @@ def _solve_block(prep: PreparedSurface, eta, solver, flat: bool, P, L, lane_id, 
 
 def _block_start_points(prep: PreparedSurface, P, L) -> StartPoint:
     """`prep.start_points(P, L)` for one block (validated lanes of the block's shape, in
-    `prep`'s frame) as a block program (`lanes.on_devices`): compiled once per mesh size
+    `prep`'s frame) as a block program (`blocks.on_devices`): compiled once per mesh size
     class and accel shape with the project's XLA options, its lanes split over the devices."""
     mesh = prep.padded  # no static grid: the accel carries the layout as arrays
     face, ab, found = on_devices(_start_points_program, None, (mesh, prep.accel), (P, L))
@@ -331,4 +331,5 @@ def _select_fields(mask, a: dict, b: dict) -> dict:
     return {k: jnp.where(mask.reshape(mask.shape + (1,) * (a[k].ndim - 1)), a[k], b[k]) for k in a}
 
 
-__all__ = ["METHODS", "LocalSolve", "check_lanes", "empty_solution", "solve", "solve_local", "solver_from"]
+__all__ = ["METHODS", "LocalSolve", "check_lanes", "empty_solution", "returns_every_path", "solve", "solve_local",
+           "solver_from"]

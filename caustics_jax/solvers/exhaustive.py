@@ -32,22 +32,29 @@ under TIR: there `|n x w_L| = eta |n x w_P|` cannot hold). Float64 only.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arc_roots import PIECES, ArcPiece, face_pieces
-from ..arcs import N_ARCS, conic_touches_face
-from ..cones import candidate_faces
-from ..conic import conic_coefficients
-from ..lanes import padded_mesh
-from ..objectives import ObjectiveStatus
-from ..start_points import start_points
-from .options import SolverOptions, check_bool, check_int, check_real, check_tol
-from .solution_set import NO_ROOTS, ExhaustiveSolution, assemble, padded_call, piece_polynomials, refine_intervals
+from ..accel.cones import candidate_faces
+from ..accel.prepared import padded_mesh
+from ..accel.start_points import start_points
+from ..curve.arc_roots import PIECES, ArcPiece, face_pieces
+from ..curve.arcs import N_ARCS, conic_touches_face
+from ..math.conic import conic_coefficients
+from ..math.objectives import ObjectiveStatus
+from ..runtime.arguments import check_bool, check_int, check_real, check_tol
+from .options import SolverOptions, option
+from .solution_set import (
+    NO_ROOTS,
+    ExhaustiveSolution,
+    assemble,
+    padded_call,
+    piece_polynomials,
+    refine_intervals,
+)
 
 __all__ = ["Exhaustive", "ExhaustiveSolution", "candidate_pairs", "candidate_roots", "solve_exhaustive"]
 
@@ -55,7 +62,6 @@ __all__ = ["Exhaustive", "ExhaustiveSolution", "candidate_pairs", "candidate_roo
 N_PIECES = N_ARCS * PIECES
 
 
-@dataclasses.dataclass(frozen=True)
 class Exhaustive(SolverOptions):
     """The certified all-solutions reference (float64) and its options.
 
@@ -71,22 +77,13 @@ class Exhaustive(SolverOptions):
 
     method: ClassVar[str] = "exhaustive"
 
-    iters: int = 60
-    max_depth: int = 48
-    tol: float = 1e-9
-    chunk: int = 4096
-    dedupe: float = 1e-7
-    cull: bool = True
-    return_all: bool = False
-
-    def _validate(self):
-        object.__setattr__(self, "iters", check_int("iters", self.iters, 1, 200))
-        object.__setattr__(self, "max_depth", check_int("max_depth", self.max_depth, 8, 60))
-        object.__setattr__(self, "tol", check_tol("tol", self.tol, optional=False))
-        object.__setattr__(self, "chunk", check_int("chunk", self.chunk, 1, 2**20))
-        object.__setattr__(self, "dedupe", check_real("dedupe", self.dedupe, 0.0))
-        object.__setattr__(self, "cull", check_bool("cull", self.cull))
-        object.__setattr__(self, "return_all", check_bool("return_all", self.return_all))
+    iters: int = option(60, lambda v: check_int("iters", v, 1, 200))
+    max_depth: int = option(48, lambda v: check_int("max_depth", v, 8, 60))
+    tol: float = option(1e-9, lambda v: check_tol("tol", v, optional=False))
+    chunk: int = option(4096, lambda v: check_int("chunk", v, 1, 2**20))
+    dedupe: float = option(1e-7, lambda v: check_real("dedupe", v, 0.0))
+    cull: bool = option(True, lambda v: check_bool("cull", v))
+    return_all: bool = option(False, lambda v: check_bool("return_all", v))
 
 
 # --------------------------------------------------------------------------- kernels

@@ -27,10 +27,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..barycentric import barycentric_point
-from ..geometry import dot, norm
-from ..mesh import SurfaceMesh
-from ..objectives import ObjectiveStatus, signed_sine_and_status
+from ..math.barycentric import barycentric_point
+from ..math.geometry import dot, norm
+from ..math.objectives import ObjectiveStatus, signed_sine_and_status
+from ..surface.mesh import SurfaceMesh
 from ._solution import Solution, Status
 
 

@@ -31,36 +31,38 @@ triangle, from a key folded with the lane's index (so a lane's starts do not dep
 how lanes are batched or spread over devices); the found solution nearest `M0` is
 returned.
 
-Lanes are scheduled by `lanes.run_pool` (default, `scheduler="pool"`: a slot pool refilled
+Lanes are scheduled by `pools.run_pool` (default, `scheduler="pool"`: a slot pool refilled
 from a queue of unfinished lanes) or by `lanes.map_lanes` (`"chunked"`: fixed chunks of
 256 lanes, each until its slowest lane); both run the same per-lane iteration.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ..arcs import inside as inside_triangle
-from ..barycentric import barycentric_coordinates, barycentric_point, edge_barycentric
-from ..geometry import dot
-from ..lanes import map_lanes, on_devices, pool_slots, run_pool
-from ..mesh import cross_edge
-from ..objectives import (
+from ..curve.arcs import inside as inside_triangle
+from ..math.barycentric import barycentric_coordinates, barycentric_point, edge_barycentric
+from ..math.geometry import dot
+from ..math.objectives import (
     ObjectiveStatus,
     angle_difference_residual,
     bracket_objective,
     half_vector_residual,
     path_vectors,
 )
+from ..runtime.arguments import MAX_INT32, check_choice, check_int, check_real, check_tol
+from ..runtime.blocks import on_devices
+from ..runtime.lanes import map_lanes
+from ..runtime.pools import pool_slots, run_pool
+from ..surface.mesh import cross_edge
 from ._solution import Solution, Status, confirm_found
-from .options import SolverOptions, check_choice, check_int, check_real, check_tol
+from .options import SolverOptions, option
 
-__all__ = ["Newton", "newton_init", "newton_iteration", "solve_newton"]
+__all__ = ["Newton", "solve_newton"]
 
 SOLVERS = ("newton", "chord", "dogleg", "levenberg_marquardt")
 CONSTRAINTS = {"half_vector": half_vector_residual, "angle_difference": angle_difference_residual}
@@ -73,7 +75,6 @@ MAX_PROJECTION_CROSSINGS = 16
 MIN_BETA = 1e-4
 
 
-@dataclasses.dataclass(frozen=True)
 class Newton(SolverOptions):
     """Newton-type manifold solvers (MNEE / SMS), and their options.
 
@@ -82,7 +83,7 @@ class Newton(SolverOptions):
     constraint: "half_vector" (MNEE) or "angle_difference" (SMS).
     stepping: "converge" (optimistix to convergence in each triangle, then cross) or
         "one_step" (one Newton step, then project back onto the surface, as MNEE/SMS).
-    scheduler: "pool" (slot pool, `lanes.run_pool`) or "chunked" (`lanes.map_lanes`).
+    scheduler: "pool" (slot pool, `pools.run_pool`) or "chunked" (`lanes.map_lanes`).
     tol: acceptance `|f| <= tol` on the signed sine, in `(0, 1)` (None: as the walk). Traced.
     inner_steps: optimistix steps per triangle patch, in `[1, 1024]` ("converge" only).
     max_patches: cap per lane on patches (triangle changes and restarts; "one_step":
@@ -98,30 +99,21 @@ class Newton(SolverOptions):
     method: ClassVar[str] = "newton"
     traced: ClassVar[tuple[str, ...]] = ("tol", "max_patches", "initial_step")
 
-    solver: str = "newton"
-    constraint: str = "half_vector"
-    tol: float | None = None
-    inner_steps: int = 8
-    max_patches: int = 64
-    n_starts: int = 1
-    seed: int = 0
-    stepping: str = "converge"
-    scheduler: str = "pool"
-    initial_step: float = 1.0
+    solver: str = option("newton", lambda v: check_choice("solver", v, SOLVERS))
+    constraint: str = option("half_vector", lambda v: check_choice("constraint", v, tuple(CONSTRAINTS)))
+    tol: float | None = option(None, lambda v: check_tol("tol", v))
+    inner_steps: int = option(8, lambda v: check_int("inner_steps", v, 1, 1024))
+    max_patches: int = option(64, lambda v: check_int("max_patches", v, 1, MAX_INT32))
+    n_starts: int = option(1, lambda v: check_int("n_starts", v, 1, 1024))
+    seed: int = option(0, lambda v: check_int("seed", v, 0))
+    stepping: str = option("converge", lambda v: check_choice("stepping", v, STEPPING))
+    scheduler: str = option("pool", lambda v: check_choice("scheduler", v, SCHEDULERS))
+    initial_step: float = option(1.0, lambda v: check_real("initial_step", v, 0, 1, lo_open=True))
 
-    def _validate(self):
-        check_choice("solver", self.solver, SOLVERS)
-        check_choice("constraint", self.constraint, tuple(CONSTRAINTS))
-        check_choice("stepping", self.stepping, STEPPING)
-        check_choice("scheduler", self.scheduler, SCHEDULERS)
+    def __check_init__(self):
         if self.stepping == "one_step" and self.solver != "newton":
             raise ValueError(f"stepping='one_step' takes plain Newton steps (MNEE/SMS): solver must be "
                              f"'newton', got {self.solver!r}")
-        object.__setattr__(self, "tol", check_tol("tol", self.tol))
-        for name, hi in (("inner_steps", 1024), ("max_patches", 2**31 - 1), ("n_starts", 1024)):
-            object.__setattr__(self, name, check_int(name, getattr(self, name), 1, hi))
-        object.__setattr__(self, "seed", check_int("seed", self.seed, 0))
-        object.__setattr__(self, "initial_step", check_real("initial_step", self.initial_step, 0, 1, lo_open=True))
 
     def check_dtype(self, dtype) -> None:
         """optimistix 0.1.0's trust-region state is created in the default float dtype, so
@@ -328,7 +320,7 @@ def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, beta0, opt
 
 
 def _pooled(mesh, P, L, face, ab, found, eta, tol, max_patches, beta0, options: Newton):
-    """Every lane (flattened over starts) through `lanes.run_pool`: the same per-lane iteration."""
+    """Every lane (flattened over starts) through `pools.run_pool`: the same per-lane iteration."""
     # (init and finish in `map_lanes` chunks, as the "chunked" scheduler: XLA rounds `f` at
     # another vector width differently: residuals 3.9e-7 apart in float32, 9e-16 in float64)
     init = map_lanes(lambda p, l, f, a, ok: newton_init(mesh, p, l, f, a, ok, eta, tol, beta0), P, L, face, ab, found)
@@ -345,7 +337,7 @@ def _pooled(mesh, P, L, face, ab, found, eta, tol, max_patches, beta0, options: 
 
 
 def _newton_block(mesh, eta, tol, max_patches, beta0, P, L, face, ab0, found, lane_id, options: Newton) -> Solution:
-    """One device's share of a block of lanes (`lanes.on_devices`)."""
+    """One device's share of a block of lanes (`blocks.on_devices`)."""
     eta = jnp.asarray(eta, mesh.dtype)
     tol = jnp.asarray(tol, mesh.dtype)
     n, S = P.shape[0], options.n_starts
@@ -396,4 +388,4 @@ def solve_newton(mesh, P, L, eta, start, opts: Newton, lane_id=None) -> Solution
     shared = (mesh, jnp.asarray(eta, mesh.dtype), jnp.asarray(opts.tolerance(mesh.dtype), mesh.dtype),
               jnp.int32(opts.max_patches), jnp.asarray(opts.initial_step, mesh.dtype))
     return on_devices(_newton_block, opts.static(), shared, (P, L, face, ab0, found, lane_id),
-                      spmd=opts.stepping != "converge")  # optimistix: see `lanes.on_devices`
+                      spmd=opts.stepping != "converge")  # optimistix: see `blocks.on_devices`

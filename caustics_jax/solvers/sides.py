@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..arguments import warn_user
-from ..prepared import PreparedSurface
+from ..accel.prepared import PreparedSurface
+from ..runtime.arguments import warn_user
 from ._solution import Solution, Status
 
 #: Failed lanes whose sides are checked (a sample: the diagnosis needs no more).

@@ -14,11 +14,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arc_roots import ArcPiece, arc_polynomial, isolate_roots, refine_root
-from ..barycentric import barycentric_point
-from ..conic import conic_coefficients
-from ..lanes import padded_index
-from ..objectives import ObjectiveStatus, bracket_objective
+from ..curve.arc_roots import ArcPiece, arc_polynomial, isolate_roots, refine_root
+from ..math.barycentric import barycentric_point
+from ..math.conic import conic_coefficients
+from ..math.objectives import ObjectiveStatus, bracket_objective
+from ..runtime.lanes import padded_index
 from ._solution import Solution, Status
 
 
@@ -73,19 +73,19 @@ def translated(result: Solution | ExhaustiveSolution, offset: np.ndarray, has_st
 
 
 @functools.partial(jax.jit, static_argnames=("iters",))
-def _refine(mesh, P, L, faces, pieces, x0, x1, isolated, eta, iters):
+def _refine(mesh, P, L, faces, pieces, x0, x1, eta, iters):
     """Refine one interval per row of `pieces` (an `ArcPiece` of arrays); returns
     `(M, ab, f, status)` (status OK only for a forward ray)."""
-    def one(p, l, f, pc, a, b, iso):
+    def one(p, l, f, pc, a, b):
         V, N = mesh.triangle(f)
         coef = conic_coefficients(V, N, p, l)
-        ab = refine_root(V, N, p, l, coef, pc, eta, a, b, iso, iters)
+        ab = refine_root(V, N, p, l, coef, pc, eta, a, b, iters)
         # Into the closed face (a root at an arc's end sits on the edge up to rounding).
         ab = jnp.stack([jnp.clip(ab[0], 0, 1), jnp.clip(ab[1], 0, 1 - jnp.clip(ab[0], 0, 1))])
         fa, st, _ = bracket_objective(V, N, p, l, ab[None], eta)
         return barycentric_point(V, ab), ab, fa[0], st[0]
 
-    return jax.vmap(one)(P, L, faces, pieces, x0, x1, isolated)
+    return jax.vmap(one)(P, L, faces, pieces, x0, x1)
 
 
 @jax.jit
@@ -128,12 +128,12 @@ def refine_intervals(mesh_b, P, L, eta, lanes, faces, pieces: ArcPiece, G, delta
     """Isolate the roots of `G` `(k, 13)` on arc pieces `k` (lane `lanes[i]`, face
     `faces[i]`, piece `pieces[i]`) and refine them: `(row, M, ab, f, status)`, `row` the
     piece each candidate lies on. `options`: an object with `max_depth`, `iters`, `chunk`."""
-    row, x0, x1, iso = isolate_roots(G, delta, options.max_depth)
+    row, x0, x1, _ = isolate_roots(G, delta, options.max_depth)
     sub = ArcPiece(*(np.asarray(x)[row] for x in pieces))
     out = padded_call(
         lambda s: _refine(mesh_b, P[lanes[row[s]]], L[lanes[row[s]]], jnp.asarray(faces[row[s]]),
                           ArcPiece(*(jnp.asarray(x[s]) for x in sub)), jnp.asarray(x0[s]),
-                          jnp.asarray(x1[s]), jnp.asarray(iso[s]), eta, options.iters),
+                          jnp.asarray(x1[s]), eta, options.iters),
         len(row), options.chunk)
     if out is None:
         return NO_ROOTS

@@ -49,31 +49,29 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arc_roots import (
+from ..accel.cones import may_refract, patch_tree
+from ..curve.arc_roots import (
     ArcPiece,
-    arc_from_point,
     arc_polynomial,
     classify,
-    inward,
     is_straight,
     pieces_of_arc,
 )
-from ..arcs import edge_roots
-from ..cones import may_refract, patch_tree
-from ..conic import conic_coefficients, conic_tangent, edge_intersections
-from ..lanes import map_lanes, padded_index, power_of_two_bucket
-from ..mesh import cross_edge
-from ..objectives import ObjectiveStatus
+from ..curve.arcs import arc_from_point, edge_roots, inward
+from ..math.conic import conic_coefficients, conic_tangent, edge_intersections
+from ..math.objectives import ObjectiveStatus
+from ..runtime.arguments import check_choice, check_int, check_real, check_tol
+from ..runtime.lanes import map_lanes, padded_index, power_of_two_bucket
+from ..surface.mesh import cross_edge
 from ._solution import Status
 from .exhaustive import Exhaustive
-from .options import SolverOptions, check_choice, check_int, check_real, check_tol
+from .options import SolverOptions, option
 from .solution_set import ExhaustiveSolution, assemble, padded_call, piece_polynomials, refine_intervals
 
 #: How a trace ended.
 _OPEN, _BOUNDARY, _CLOSED, _LOST, _STEPS, _OVERFLOW = range(6)
 
 
-@dataclasses.dataclass(frozen=True)
 class Trace(SolverOptions):
     """All solutions on the traced coplanarity curve (module docstring) and its options.
 
@@ -94,25 +92,14 @@ class Trace(SolverOptions):
 
     method: ClassVar[str] = "trace"
 
-    tol: float | None = None
-    seeds: str = "boundary"
-    max_steps: int = 4096
-    max_arcs: int = 32
-    iters: int = 60
-    max_depth: int = 48
-    dedupe: float | None = None
-    chunk: int = 4096
-
-    def _validate(self):
-        object.__setattr__(self, "tol", check_tol("tol", self.tol))
-        object.__setattr__(self, "seeds", check_choice("seeds", self.seeds, ("boundary", "start")))
-        object.__setattr__(self, "max_steps", check_int("max_steps", self.max_steps, 1, 2**20))
-        object.__setattr__(self, "max_arcs", check_int("max_arcs", self.max_arcs, 1, 1024))
-        object.__setattr__(self, "iters", check_int("iters", self.iters, 1, 200))
-        object.__setattr__(self, "max_depth", check_int("max_depth", self.max_depth, 8, 60))
-        if self.dedupe is not None:
-            object.__setattr__(self, "dedupe", check_real("dedupe", self.dedupe, 0.0))
-        object.__setattr__(self, "chunk", check_int("chunk", self.chunk, 1, 2**20))
+    tol: float | None = option(None, lambda v: check_tol("tol", v))
+    seeds: str = option("boundary", lambda v: check_choice("seeds", v, ("boundary", "start")))
+    max_steps: int = option(4096, lambda v: check_int("max_steps", v, 1, 2**20))
+    max_arcs: int = option(32, lambda v: check_int("max_arcs", v, 1, 1024))
+    iters: int = option(60, lambda v: check_int("iters", v, 1, 200))
+    max_depth: int = option(48, lambda v: check_int("max_depth", v, 8, 60))
+    dedupe: float | None = option(None, lambda v: None if v is None else check_real("dedupe", v, 0.0))
+    chunk: int = option(4096, lambda v: check_int("chunk", v, 1, 2**20))
 
     def dedupe_radius(self, dtype, extent: float = 2.0) -> float:
         """`dedupe`, or its default for a mesh whose largest coordinate is `extent` (m)."""
@@ -160,8 +147,9 @@ def _trace_one(mesh, cones, P, L, eta, seed, max_steps, max_arcs):
         V, N = mesh.triangle(face)
         coef = conic_coefficients(V, N, P, L)
         entry_t, ab, snapped = _snap_to_root(coef, entry_edge, entry_t, ab)
-        tau, perp, ok, exit_edge, exit_t, exit_ab, phi = arc_from_point(coef, ab, direction, entry_edge, entry_t)
-        ok = ok & snapped
+        arc = arc_from_point(coef, ab, direction, entry_edge, entry_t)
+        tau, perp, exit_edge, exit_t, exit_ab, phi = arc.tau, arc.perp, arc.edge, arc.t, arc.ab, arc.phi
+        ok = arc.exists & snapped
         pcs = pieces_of_arc(ab, tau, perp, jnp.where(ok, phi, 0), exit_ab, is_straight(coef), ok)
         maybe = may_refract(centre[face], radius[face], axis[face], angle[face], P, L, eta)
         G, delta, _ = jax.vmap(lambda pc: arc_polynomial(V, N, P, L, coef, pc, eta))(pcs)
@@ -197,8 +185,8 @@ def _start_seeds(mesh, P, L, face, ab):
     t = jax.vmap(conic_tangent)(coef, ab)
 
     def exits(c, a, d):
-        _, _, ok, edge, te, _, _ = arc_from_point(c, a, d)
-        return jnp.where(ok, edge, -1), te
+        arc = arc_from_point(c, a, d)
+        return jnp.where(arc.exists, arc.edge, -1), arc.t
 
     e_plus, t_plus = jax.vmap(exits)(coef, ab, t)
     e_minus, t_minus = jax.vmap(exits)(coef, ab, -t)
@@ -317,7 +305,7 @@ def solve_trace(mesh, P, L, eta, start, options: Trace, padded) -> ExhaustiveSol
     owner, pts, tris, abs_, res = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32),
                                    np.zeros((0, 2)), np.zeros(0))
     depth = options.max_depth if dtype == jnp.float64 else min(options.max_depth, 24)
-    refine_opts = dataclasses.replace(options, max_depth=depth)
+    refine_opts = options.with_options(max_depth=depth)
     if pieces is not None and len(lanes_rows):
         G, delta = padded_call(
             lambda sl: piece_polynomials(padded, P[lanes_rows[sl]], L[lanes_rows[sl]], jnp.asarray(faces_rows[sl]),
@@ -356,7 +344,7 @@ def with_solutions(method, options: dict):
     if method == "exhaustive":
         return method, {**options, "return_all": True}
     if isinstance(method, Exhaustive):
-        return dataclasses.replace(method, return_all=True), options
+        return method.with_options(return_all=True), options
     raise ValueError(f"solutions='all' needs method='walk' (the tracer), 'trace' or 'exhaustive', got {method!r}")
 
 
@@ -365,7 +353,7 @@ def closed_component(mesh, P, L, face, ab, *, eta: float = 1.333, max_steps: int
     a solution) closes on itself without meeting the boundary: its component has no
     boundary root, so `seeds="boundary"` reaches it only through `M0` (module docstring).
     Both directions are traced from the point, as from `M0`."""
-    from ..prepared import prepare
+    from ..accel.prepared import prepare
 
     prep = prepare(mesh)
     dtype = prep.dtype

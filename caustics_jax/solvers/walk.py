@@ -28,9 +28,9 @@ Scheduling (`Walk.scheduler`, docs/solvers.md "Throughput and the machine's limi
 `vmap` every lane pays for every branch, and a `while_loop` runs until its slowest lane.
 `"pool"` (default) computes the first triangle without the ellipse samples for every lane
 that has a start point, the 64-sample ellipse search (step 1's rare case) only for the
-lanes whose curve has no edge crossing (`lanes.map_where`), and steps the lanes in two
+lanes whose curve has no edge crossing (`pools.map_where`), and steps the lanes in two
 slot pools, one for walking lanes (crossings) and one for refining lanes (dichotomy and
-TIR-onset search), each refilled from a queue of lanes in its mode (`lanes.run_pools`),
+TIR-onset search), each refilled from a queue of lanes in its mode (`pools.run_pools`),
 so a step computes only the branch its lane needs. `"chunked"` is the
 previous scheduler (every lane computes the ellipse samples; fixed chunks of 256 lanes,
 each until its slowest lane), kept for comparison. Both apply the same per-lane functions
@@ -48,17 +48,17 @@ compile time goes").
 
 from __future__ import annotations
 
-import dataclasses
 from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arcs import (
-    INWARD,
+from ..curve.arcs import (
+    arc_from_point,
     edge_roots,
     inside,
+    inward,
     leaving_at_start,
     next_crossing,
     opposite,
@@ -67,22 +67,23 @@ from ..arcs import (
     project_to_conic,
     root_between,
 )
-from ..barycentric import barycentric_point
-from ..conic import conic_coefficients, conic_tangent
-from ..lanes import map_lanes, map_where, on_devices, pool_slots, run_pools
-from ..mesh import SurfaceMesh, cross_edge
-from ..objectives import ObjectiveStatus, bracket_objective, path_vectors, signed_sine
+from ..math.barycentric import barycentric_point
+from ..math.conic import conic_coefficients, conic_tangent
+from ..math.objectives import ObjectiveStatus, bracket_objective, path_vectors, signed_sine
+from ..runtime.arguments import check_choice, check_int, check_tol
+from ..runtime.blocks import on_devices
+from ..runtime.lanes import map_lanes
+from ..runtime.pools import map_where, pool_slots, run_pools
+from ..surface.mesh import SurfaceMesh, cross_edge
 from ._solution import Solution, Status, confirm_found
-from .options import SolverOptions, check_choice, check_int, check_tol, default_tol
+from .options import SolverOptions, option
 
-__all__ = ["Walk", "default_tol", "solve_walk", "walk_advance", "walk_ellipse", "walk_init", "walk_lane", "walk_step",
-           "walk_turn_back"]
+__all__ = ["Walk", "solve_walk"]
 
 WALK, BISECT, DONE = 0, 1, 2
 SCHEDULERS = ("pool", "chunked")
 
 
-@dataclasses.dataclass(frozen=True)
 class Walk(SolverOptions):
     """The curve walk of seed 001 §3.4 and its options (`solve(..., method=Walk(...))`).
 
@@ -100,18 +101,11 @@ class Walk(SolverOptions):
     method: ClassVar[str] = "walk"
     traced: ClassVar[tuple[str, ...]] = ("tol", "max_steps")
 
-    tol: float | None = None
-    max_steps: int = 512
-    bracket: str = "illinois"
-    ellipse_samples: int = 64
-    scheduler: str = "pool"
-
-    def _validate(self):
-        object.__setattr__(self, "tol", check_tol("tol", self.tol))
-        object.__setattr__(self, "max_steps", check_int("max_steps", self.max_steps, 1))
-        check_choice("bracket", self.bracket, ("illinois", "bisection"))
-        object.__setattr__(self, "ellipse_samples", check_int("ellipse_samples", self.ellipse_samples, 2, 4096))
-        check_choice("scheduler", self.scheduler, SCHEDULERS)
+    tol: float | None = option(None, lambda v: check_tol("tol", v))
+    max_steps: int = option(512, lambda v: check_int("max_steps", v, 1))
+    bracket: str = option("illinois", lambda v: check_choice("bracket", v, ("illinois", "bisection")))
+    ellipse_samples: int = option(64, lambda v: check_int("ellipse_samples", v, 2, 4096))
+    scheduler: str = option("pool", lambda v: check_choice("scheduler", v, SCHEDULERS))
 
 
 class _State(NamedTuple):
@@ -399,12 +393,7 @@ def _ellipse_bracket(mesh, P, L, eta, n_ellipse, s: _State, e: _Ellipse) -> _Sta
 
 def _walk_geometry(mesh, coef, g, k_in, t_in, e):
     """Enter face `g` at `e` (entry edge `k_in`): inward travel direction, next crossing."""
-    t = conic_tangent(coef, e)
-    inward = jnp.asarray(INWARD, t.dtype)[jnp.clip(k_in, 0, 2)]
-    side = t @ inward
-    tau, perp = orientation(coef, e, jnp.where(side < 0, -t, t))
-    ok, k, tt, ab, phi = next_crossing(edge_roots(coef), e, tau, perp, k_in, t_in)
-    return side, tau, perp, ok, k, tt, ab, phi
+    return arc_from_point(coef, e, inward(k_in, coef.dtype), k_in, t_in)
 
 
 def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
@@ -705,8 +694,7 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     # walk again. Per lane the same steps as turning back right after the failing step
     # (the step count carries over, so `max_steps` caps both ways together); the pools
     # move 24 fields per lane (35 numbers) instead of 48 (66) and run no turn-back per trip
-    # (the pool alone with counting steps, 32,768 float64 lanes: 59-88 ms before, 20-24 ms
-    # without the per-step turn-back and the second state; `experiments/compile_options.py`'s
+    # (docs/solvers.md, "Measurements behind the code"; `experiments/compile_options.py`'s
     # "scheduler alone" rows measure the pool as it is).
     steps = tuple(lambda lane, m=m: walk_step(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT))
 
@@ -720,7 +708,7 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
 
 
 def _walk_block(mesh, eta, tol, max_steps, P, L, face, ab0, found, options: Walk) -> Solution:
-    """One device's share of a block of lanes (`lanes.on_devices`)."""
+    """One device's share of a block of lanes (`blocks.on_devices`)."""
     eta = jnp.asarray(eta, mesh.dtype)
     tol = jnp.asarray(tol, mesh.dtype)
     if options.scheduler == "pool":
@@ -753,7 +741,7 @@ def _walk_block(mesh, eta, tol, max_steps, P, L, face, ab0, found, options: Walk
 
 def solve_walk(mesh: SurfaceMesh, P, L, eta, start, options: Walk) -> Solution:
     """The walk on one block of lanes (`solve` runs every batch in blocks of one size, split
-    over the local devices): `mesh` from `lanes.padded_mesh`, `start = (face, barycentric,
+    over the local devices): `mesh` from `prepared.padded_mesh`, `start = (face, barycentric,
     found)`, `eta` a float."""
     face, ab0, found = start
     shared = (mesh, jnp.asarray(eta, mesh.dtype), jnp.asarray(options.tolerance(mesh.dtype), mesh.dtype),

@@ -45,15 +45,13 @@ def assert_same_lanes(a, b, fields, *, ulps: float = 64) -> None:
     float fields within `ulps` epsilons of each lane's magnitude (`lane_ulps`).
 
     Not bit-identity: XLA generates each program's kernels separately, and their vector
-    code may contract or order operations differently. On an AVX-512 machine (2026-11-30)
-    3 of the 48 ellipse lanes of `tests/test_walk.py` came out of the pool and of the
-    chunked scheduler with points 1.3e-15 apart (float64; 0.014 epsilons of the lane's
-    magnitude, lanes hundreds of metres out), barycentrics 9.3 and residuals 9.0 epsilons
-    apart, with the same statuses and iteration counts; the 4096 pool lanes of
-    `tests/test_scheduling.py` were identical. `ulps = 64` leaves a factor 7 over the
-    largest of these. Residuals (`f`, a sine of unit vectors) carry an absolute rounding
-    of a few epsilons whatever their value, so they are compared at magnitude 1 too; a
-    change of `found` or `status` is caught exactly. A NaN must be in both runs.
+    code may contract or order operations differently: points, barycentrics and residuals
+    of a lane may move by a few epsilons while its statuses and iteration counts stay the
+    same. `ulps = 64` leaves a factor 7 over the largest such difference seen between the
+    pool and the chunked scheduler (docs/solvers.md, "Measurements behind the code").
+    Residuals (`f`, a sine of unit vectors) carry an absolute rounding of a few epsilons
+    whatever their value, so they are compared at magnitude 1 too; a change of `found` or
+    `status` is caught exactly. A NaN must be in both runs.
     """
     for name in fields:
         x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))

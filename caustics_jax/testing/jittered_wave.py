@@ -1,5 +1,6 @@
-"""Issue 16's surface: a small heightfield with jittered vertices and 5 cm waves, on which
-the sampled exhaustive reference lost planted paths."""
+"""A small heightfield with jittered vertices and 5 cm waves, on which an exhaustive
+reference that samples `f` along the arcs loses planted paths (docs/solvers.md "The
+certified reference")."""
 
 from __future__ import annotations
 
@@ -15,10 +16,10 @@ def jittered_heightfield(n: int = 12, *, seed: int = 0, half: float = 2.0, jitte
     `normals="computed"`: the mesh's angle-weighted vertex normals (`SurfaceMesh.from_arrays`
     default); `"analytic"`: the waves' own normals. The grid's connectivity with moved
     vertices is a general mesh (no `GridInfo`). With 300 planted paths
-    (`planted_mesh_paths(mesh, 300, seed)`) the sampled exhaustive reference lost one path
-    at seeds 1 and 2 (computed normals) and 2 (analytic).
+    (`planted_mesh_paths(mesh, 300, seed)`) it holds the cases a sampling reference misses;
+    their seeds are in docs/solvers.md, "Measurements behind the code".
     """
-    from ..mesh import GridInfo, SurfaceMesh
+    from ..surface.mesh import GridInfo, SurfaceMesh
 
     if normals not in ("computed", "analytic"):
         raise ValueError(f"normals must be 'computed' or 'analytic', got {normals!r}")

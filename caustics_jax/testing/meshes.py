@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh import SurfaceMesh
-from ..scenes import wavy_pool
+from ..surface.mesh import SurfaceMesh
+from ..surface.scenes import wavy_pool
 
 
 def jittered_grid(n_triangles: int, jitter: float, *, seed: int = 0, flat: bool = False,

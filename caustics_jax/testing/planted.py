@@ -152,7 +152,7 @@ def partly_covered_floor(dtype, *, n_triangles: int = 512, n: int = 16, half: fl
     benchmark)."""
     import jax.numpy as jnp
 
-    from .. import scenes
+    from ..surface import scenes
 
     scene = scenes.wavy_pool(n_triangles, n_receivers=16, dtype=dtype)
     u = (np.arange(n) + 0.5) / n * 2 * half - half

@@ -35,16 +35,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._precision import float_inputs, in_domain
-from ..arguments import check_bool, check_fits, check_points, check_real, real_array
-from ..barycentric import barycentric_coordinates, barycentric_point
-from ..features import check as check_features
-from ..geometry import dot, fresnel_transmittance, norm, unit_vector
-from ..lanes import compact_index, scatter_lanes
-from ..mesh import SurfaceMesh
-from ..objectives import path_vectors
-from ..prepared import PreparedSurface, prepare
-from ..solvers import Exhaustive, ExhaustiveSolution, Solution, Trace, returns_every_path, solve_local
+from ..accel.prepared import PreparedSurface, prepare
+from ..math.barycentric import barycentric_coordinates, barycentric_point
+from ..math.geometry import dot, fresnel_transmittance, norm, unit_vector
+from ..math.objectives import path_vectors
+from ..runtime.arguments import check_bool, check_fits, check_points, check_real, real_array
+from ..runtime.kernel_contract import float_inputs, in_domain
+from ..runtime.lanes import compact_index, scatter_lanes
+from ..solvers import Exhaustive, ExhaustiveSolution, Solution, Trace
+from ..solvers._solve import returns_every_path, solve_local
+from ..surface.features import check as check_features
+from ..surface.mesh import SurfaceMesh
 from .differentials import ray_differential_D
 from .visibility import path_visible
 

@@ -44,10 +44,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from .._precision import float_inputs
-from ..barycentric import barycentric_coordinates, interpolated_normal
-from ..geometry import dot, norm, refract, refraction_k, safe_div, safe_normalize
-from ..objectives import orthonormal_frame, path_vectors
+from ..math.barycentric import barycentric_coordinates, interpolated_normal
+from ..math.geometry import dot, norm, refract, refraction_k, safe_div, safe_normalize
+from ..math.objectives import orthonormal_frame, path_vectors
+from ..runtime.kernel_contract import float_inputs
 
 
 def validity_threshold(dtype):

@@ -37,15 +37,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._precision import check_mesh_dtype
-from ..arguments import check_eta, check_fits, check_int, check_real
-from ..features import check as check_features
-from ..lanes import lanes_per_block
-from ..mesh import SurfaceMesh
-from ..objectives import ObjectiveStatus, bracket_objective
-from ..prepared import PreparedSurface, prepare
-from ..solvers import Newton, check_lanes, solve
-from ..start_points import StartPoint
+from ..accel.prepared import PreparedSurface, prepare
+from ..accel.start_points import StartPoint
+from ..math.objectives import ObjectiveStatus, bracket_objective
+from ..runtime.arguments import check_eta, check_fits, check_int, check_real
+from ..runtime.blocks import lanes_per_block
+from ..runtime.precision import check_mesh_dtype
+from ..solvers import Newton, solve
+from ..solvers._solve import check_lanes
+from ..surface.features import check as check_features
+from ..surface.mesh import SurfaceMesh
 from .contribution import check_intensity, check_receiver_normal, path_irradiance
 
 
@@ -142,7 +143,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     `newton_options` go to
     `caustics_jax.Newton` (solver, constraint, tol, max_patches, ...) and `features` to
     `solve`; anything else (`method`, `start`: the estimator sets them) is a `ValueError`."""
-    newton = Newton.from_kwargs(**newton_options)
+    newton = Newton(**newton_options)
     check_features(features)
     k = _check_count("k", k, 1)
     seed = check_int("seed", seed, 0)
@@ -178,7 +179,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
     """Unbiased SMS: one solve, then Bernoulli trials until the same solution recurs; the
     path's irradiance times the trial count (Zeltner et al. 2020 §4.3; module docstring).
     `newton_options` as `sms_biased`'s."""
-    newton = Newton.from_kwargs(**newton_options)
+    newton = Newton(**newton_options)
     check_features(features)
     max_trials = _check_count("max_trials", max_trials, 1)
     seed = check_int("seed", seed, 0)
@@ -193,7 +194,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
         g = jnp.asarray(hit)
         E_path[hit] = _path_irradiance(prep.mesh, face[hit], ab[hit], P[g], L[g], eta, I_e[hit], n_P[hit], sigma_t)
     # The trials run in rounds: each active lane draws `m` fresh starts at once (enough to
-    # fill one block of `solve`, `lanes.lanes_per_block`), and its outcomes are read in
+    # fill one block of `solve`, `blocks.lanes_per_block`), and its outcomes are read in
     # order as the sequential loop would: the first recurrence ends the lane, a miss adds
     # one to its count, the miss that takes the count past `max_trials` caps it. Starts
     # drawn after a lane's end are discarded and not counted in `solves`.

@@ -38,12 +38,22 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._precision import float_inputs, in_domain
-from ..arguments import check_int, check_points, check_real, real_array
-from ..barycentric import barycentric_coordinates, interpolated_normal
-from ..geometry import dot, norm, reflect, refract, refraction_k, safe_div, safe_normalize, safe_sqrt, unit_vector
-from ..mesh import SurfaceMesh
-from ..objectives import orthonormal_frame
+from ..math.barycentric import barycentric_coordinates, interpolated_normal
+from ..math.geometry import (
+    dot,
+    norm,
+    reflect,
+    refract,
+    refraction_k,
+    safe_div,
+    safe_normalize,
+    safe_sqrt,
+    unit_vector,
+)
+from ..math.objectives import orthonormal_frame
+from ..runtime.arguments import check_int, check_points, check_real, real_array
+from ..runtime.kernel_contract import float_inputs, in_domain
+from ..surface.mesh import SurfaceMesh
 from .differentials import validity_threshold
 from .photons import EmissionPlane, ReceiverGrid, refract_into_medium, surface_hits
 
@@ -71,9 +81,10 @@ def _unit_directions(*vectors):
     """Where every vector (Alg. 2's normals and light directions) is a unit vector to
     `_UNIT_SLACK`: finite, not zero and not of another length (zero normals had given
     `sigma = 1` valid). They are used as given, so values and derivatives are the formula's:
-    normalising them here moved float32-rounded inputs by their own rounding, each
-    independently of its neighbour (the float64 ratio's error on 0.1 mm texels went from
-    1.5e-9 to 7e-5), and changed the derivatives along the vectors."""
+    normalising them here would move float32-rounded inputs by their own rounding, each
+    independently of its neighbour, which on small texels swamps the neighbours'
+    difference (docs/irradiance.md, "Measurements behind the code"), and would change the
+    derivatives along the vectors."""
     ok = True
     for v in vectors:
         ok = ok & (jnp.abs(dot(v, v) - 1) <= _UNIT_SLACK)  # NaN and inf compare False
@@ -435,8 +446,8 @@ def splat_footprints(xy, flux, J, du: float, dv: float, receiver: ReceiverGrid, 
     `(2 window + 1)^2` block of cells, normalised so that it deposits exactly its flux
     (flux leaving the grid is lost, as it should be). `kappa = 0.7` texel keeps the sum of
     kernels on a regular texel lattice flat to ~1e-4 (Poisson summation:
-    `2 exp(-2 pi^2 kappa^2)`; measured 1.2e-4 on a lattice of 1.46 cells, 0.32 with
-    `kappa = 0.3`); the cell term keeps a footprint smaller than a cell from aliasing. A
+    `2 exp(-2 pi^2 kappa^2)`; docs/irradiance.md, "Measurements behind the code"); the
+    cell term keeps a footprint smaller than a cell from aliasing. A
     footprint wider than about `window / 3` cells is truncated (still flux conserving,
     but blurred less than asked). The receiver plane must be horizontal (`J` in x, y).
     Returns `(ny, nx)` irradiance (W/m^2).

@@ -32,15 +32,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._precision import check_mesh_dtype
-from ..arguments import check_eta, check_fits, check_int, check_points, check_real
-from ..barycentric import barycentric_point, interpolated_normal
-from ..geometry import dot, fresnel_transmittance, refract, safe_normalize
-from ..lanes import power_of_two_bucket
-from ..mesh import SurfaceMesh
-from ..prepared import PreparedSurface, kept_accel, prepare
-from ..progress import progress as progress_bar
-from ..start_points import first_crossing
+from ..accel.prepared import PreparedSurface, kept_accel, prepare
+from ..accel.start_points import first_crossing
+from ..math.barycentric import barycentric_point, interpolated_normal
+from ..math.geometry import dot, fresnel_transmittance, refract, safe_normalize
+from ..runtime.arguments import check_eta, check_fits, check_int, check_points, check_real
+from ..runtime.lanes import power_of_two_bucket
+from ..runtime.precision import check_mesh_dtype
+from ..runtime.progress import progress as progress_bar
+from ..surface.mesh import SurfaceMesh
 
 #: Largest `n_photons` of one `photon_irradiance` call: 2^32 photons are hours of tracing on
 #: a CPU (the experiments use up to 2^26); a larger count is a typo, refused rather than
@@ -191,8 +191,8 @@ def surface_hits(mesh: SurfaceMesh, L, X, *, bvh=None):
     s_far = (L[..., 2] - z_lo + (z_hi - z_lo) + 1) / jnp.maximum(-d[..., 2], jnp.finfo(d.dtype).tiny)
     end = L + s_far[..., None] * d
     L_b = jnp.broadcast_to(L, end.shape)
-    # The structure `prepare` keeps for this mesh (it had binned a 65k-triangle mesh's
-    # faces on every call: 180 ms for 64 rays).
+    # The structure `prepare` keeps for this mesh: binning the faces on every call would cost
+    # more than tracing a few rays (docs/mesh.md, "Measurements behind the code").
     return first_crossing(mesh, L_b, end, bvh=bvh, accel=None if bvh is not None else kept_accel(mesh))
 
 
@@ -248,7 +248,7 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
         chunk: most photons traced per jitted call (fewer `n_photons`: one call of the
             power of two above it, at least 256; a new size compiles once).
         progress: optional callable `progress(done, total)`, called after each chunk; a
-            progress bar is drawn on a terminal in any case (`caustics_jax.progress`).
+            progress bar is drawn on a terminal in any case (`caustics_jax.runtime.progress`).
 
     Traced in the mesh's dtype; binned in float64.
     """

@@ -22,8 +22,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..prepared import PreparedSurface, prepare
-from ..start_points import check_segments, first_crossing
+from ..accel.prepared import PreparedSurface, prepare
+from ..accel.start_points import check_segments, first_crossing
 
 
 def visibility_eps(dtype) -> float:

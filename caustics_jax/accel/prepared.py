@@ -5,7 +5,7 @@ analysis runs once per scene, eagerly, even when first asked for inside a user's
 `prepare(mesh)` does the host analysis a solve needs and caches it per mesh object, so
 repeated `solve` / `irradiance` calls on the same mesh do no host analysis at all:
 
-- `padded`: the mesh padded to power-of-two face and vertex counts (`lanes.padded_mesh`),
+- `padded`: the mesh padded to power-of-two face and vertex counts (`prepared.padded_mesh`),
   what the jitted solvers take, so jit compiles once per mesh size class;
 - `features`: `features.mesh_features(mesh)`, the flags of `features(mesh)` (flat closed form,
   lane compaction); `prepare` checks the arrays first (`mesh.check_arrays()`);
@@ -21,8 +21,8 @@ repeated `solve` / `irradiance` calls on the same mesh do no host analysis at al
   solved near it, so float32 keeps the digits its triangles need.
 
 `solve` and `irradiance` accept a `PreparedSurface` wherever they accept a `SurfaceMesh`.
-`start_points` here is the package's `caustics_jax.start_points`: the module function of
-`caustics_jax.start_points` with the structure kept per mesh (`kept_accel`, which
+`start_points` here is the package's `caustics_jax.accel.start_points`: the module function of
+`caustics_jax.accel.start_points` with the structure kept per mesh (`kept_accel`, which
 `transport.surface_hits` uses too, for meshes `cacheable` holds).
 The cache holds a weak reference to the mesh: a prepared surface lives as long as its mesh.
 A mesh changed with `eqx.tree_at` (animated water) is a new object and is prepared anew.
@@ -31,18 +31,20 @@ A mesh changed with `eqx.tree_at` (animated water) is a new object and is prepar
 from __future__ import annotations
 
 import copy
+import dataclasses
 import weakref
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._precision import check_mesh_dtype
-from .arguments import warn_user
-from .features import SceneFeatures, mesh_features
-from .frames import grid_state, local_mesh, local_origin
-from .lanes import padded_mesh
-from .mesh import SurfaceMesh
+from ..runtime.arguments import warn_user
+from ..runtime.lanes import power_of_two_bucket
+from ..runtime.precision import check_mesh_dtype
+from ..surface.features import SceneFeatures, mesh_features
+from ..surface.frames import grid_state, local_mesh, local_origin
+from ..surface.mesh import SurfaceMesh
 from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, check_segments
 from .start_points import start_points as start_points_on_mesh  # (this module's `start_points` wraps it)
 
@@ -68,6 +70,32 @@ class _Analysis:
         self.bvh: FaceBVH | None = None
         self.origin = local_origin(V, mesh.dtype)
         self.local: PreparedSurface | None = None
+
+
+
+def padded_mesh(mesh: SurfaceMesh) -> SurfaceMesh:
+    """The mesh padded to power-of-two face and vertex counts, so jit compiles once per bucket.
+
+    The static `grid` layout is dropped (the solvers never read it; only start points do,
+    and as a static field it would make every pool size its own compile). Padding faces
+    are `(0, 0, 0)` with no neighbours and are never referenced by a real face's
+    adjacency, so no walk can enter them; padding vertices are zeros.
+    """
+    F, V = mesh.faces.shape[0], mesh.vertices.shape[0]
+    Fb, Vb = power_of_two_bucket(F), power_of_two_bucket(V)
+    mesh = dataclasses.replace(mesh, grid=None)
+    if (F, V) == (Fb, Vb):
+        return mesh
+
+    def pad(x, n, value):
+        return jnp.concatenate([x, jnp.full((n - x.shape[0],) + x.shape[1:], value, x.dtype)])
+
+    return eqx.tree_at(
+        lambda m: (m.vertices, m.normals, m.faces, m.face_normals, m.neighbors, m.neighbor_edge),
+        mesh,
+        (pad(mesh.vertices, Vb, 0), pad(mesh.normals, Vb, 0), pad(mesh.faces, Fb, 0),
+         pad(mesh.face_normals, Fb, 0), pad(mesh.neighbors, Fb, -1), pad(mesh.neighbor_edge, Fb, -1)),
+    )
 
 
 class PreparedSurface:
@@ -209,19 +237,18 @@ def kept_accel(mesh: SurfaceMesh) -> Accel | None:
 
 def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "auto", bvh: FaceBVH | None = None,
                  accel: Accel | None = None) -> StartPoint:  # fmt: skip
-    """`caustics_jax.start_points`: `start_points.start_points` (same arguments, checks and
+    """`caustics_jax.accel.start_points`: `start_points.start_points` (same arguments, checks and
     results; its docstring) with the acceleration structure `prepare(mesh)` keeps per mesh
     object, so repeated calls on one mesh build nothing on the host.
 
     With `method="auto"` and neither `accel` nor `bvh`, a mesh holding JAX arrays (or a
     `PreparedSurface`) takes `prepare(mesh).start_points` (run about `prepare(mesh).origin`,
     as `solve` runs). Otherwise, and for a mesh holding numpy arrays or traced ones, the
-    structure is built for this call, as `start_points.start_points` builds it. Measured
-    (2026-11-30, 4096 lanes, float32, the second and later calls): a 32,768-triangle
-    jittered mesh (binned faces) 150-158 ms per call before, 7-11 ms kept; the
-    1,001,112-triangle wavy pool (grid cells, checked against the vertices and copied to
-    the device on every call before) 110 -> 60 ms, the rest being the per-call work on
-    the traced heights (`face_cells.first_hit_cells`).
+    structure is built for this call, as `start_points.start_points` builds it. A kept
+    structure takes the host work (binning, checking grid cells against the vertices,
+    copying them to the device) out of every call after the first; what a call still
+    pays is the traversal on the traced heights (`face_cells.first_hit_cells`)
+    (docs/mesh.md, "Measurements behind the code").
 
     What the first call on a mesh does is `prepare(mesh)`'s (kept as long as the mesh
     lives): the padded copy, the features, a local copy for a mesh far from the origin;

@@ -33,8 +33,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .lanes import padded_index
-from .mesh import SurfaceMesh
+from ..runtime.lanes import padded_index
+from ..surface.mesh import SurfaceMesh
 from .start_points import build_bvh
 
 #: Faces per leaf of the patch tree.

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from ._precision import float_inputs
+from ..runtime.kernel_contract import float_inputs
 from .barycentric import edge_barycentric
 
 
@@ -100,6 +100,18 @@ def conic_tangent(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) 
     return jnp.stack([-v, u], axis=-1)
 
 
+def conic_centre(coef: Float[Array, "*batch 6"]):
+    """Centre `(a_c, b_c)` of the conic `A a^2 + B b^2 + C ab + D a + E b + F` (seed 001
+    eq. 11), where its gradient vanishes (`2A a + C b + D = 0`, `C a + 2B b + E = 0`), and
+    whether it is an ellipse (`4AB - C^2 > 0`). Where it is not, the centre is finite and
+    meaningless (the divisor is replaced by 1)."""
+    A, B, C, D, E, _ = jnp.moveaxis(coef, -1, 0)
+    det = 4 * A * B - C * C
+    ellipse = det > 0
+    safe = jnp.where(ellipse, det, 1)
+    return (C * E - 2 * B * D) / safe, (C * D - 2 * A * E) / safe, ellipse
+
+
 @float_inputs("V", "t")
 def tangent_to_world(V: Float[Array, "*batch 3 3"], t: Float[Array, "*batch 2"]) -> Float[Array, "*batch 3"]:
     """`t_world = t_a (V1 - V0) + t_b (V2 - V0)` (MATH.md §2)."""
@@ -124,8 +136,9 @@ def edge_quadratics(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3"
 def power_of_two_floor(x):
     """`2^floor(log2 x)` for positive normal `x`, from its exponent bits alone (0 for a
     subnormal): dividing by it is exact. Bit masks, where `jnp.frexp`/`ldexp` lower to
-    ~50 and ~35 operations each: with the walk's ~20 quadratics the mask removed 681 of its
-    12,602 StableHLO operations and cut its first compile by 15-25% (docs/conic.md)."""
+    ~50 and ~35 operations each: the walk solves ~20 quadratics, so the mask keeps its
+    program smaller and its first compile shorter (docs/solvers.md, "Measurements behind
+    the code"; docs/conic.md)."""
     x = jnp.asarray(x)
     info = jnp.finfo(x.dtype)
     uint = {4: jnp.uint32, 8: jnp.uint64}[x.dtype.itemsize]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ._precision import float_inputs
+from ..runtime.kernel_contract import float_inputs
 from .geometry import dot
 
 

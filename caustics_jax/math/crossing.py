@@ -15,18 +15,16 @@ crossing sits at `s <= 1` along it). First-order propagation gives
 
 (`|pvec| / |det|` is `1 / (height of V1 over the edge V0 V2)` for a segment along the
 normal, and grows as `1 / cos` for a grazing one). A constant tolerance such as
-`16 eps` is 300-1000x too small on a 1M-triangle pool with 6 mm cells and 2-5 m
-coordinates: a segment through a shared edge or vertex was then rejected by every face
-around it (issue 14 class 5, `docs/mesh.md`), and since XLA's CPU rounding of the same lane
-differs with the batch shape (measured: `jnp.sum(a * b, -1)` over 3 components gives
-different bits for 40 of 100 lanes when the batch has 100 rather than 4096 lanes), the
-lane was found alone and lost in a batch. Here each bound is `C_ROUND = 8` times the
-first-order estimate plus `16 eps`. Measured on 20,000 segments through planted edge and
-vertex crossings of the 1M-triangle wavy pool (float32 and float64, grid and BVH paths):
-misses begin below `C = 0.25` (2 of 20,000 at 0.1, 90 at 0.03), so 8 leaves a 32x margin,
-far more than the rounding differences between batch shapes. A hit that close outside a
-face is a hit of the face within the rounding of its coordinates (12 µm on that pool in
-float32, 2e-11 m in float64); its barycentrics are projected into the closed triangle.
+`16 eps` is orders of magnitude too small for small cells far from the origin: a segment
+through a shared edge or vertex is then rejected by every face around it, and since
+XLA's CPU rounding of the same lane differs with the batch shape, such a lane is found
+alone and lost in a batch (docs/mesh.md, "Crossings on cell walls, edges and vertices").
+Here each bound is `C_ROUND = 8` times the first-order estimate plus `16 eps`: a 32x
+margin over the smallest factor at which planted edge and vertex crossings stop being
+missed, far more than the rounding differences between batch shapes (docs/mesh.md,
+"Measurements behind the code"). A hit that close outside a face is a hit of the face
+within the rounding of its coordinates; its barycentrics are projected into the closed
+triangle.
 """
 
 from __future__ import annotations

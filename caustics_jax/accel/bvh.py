@@ -16,9 +16,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._precision import check_mesh_dtype
-from .crossing import clip_to_box, finite_segments, first_of, triangle_crossing
-from .mesh import SurfaceMesh
+from ..math.crossing import clip_to_box, finite_segments, first_of, triangle_crossing
+from ..runtime.precision import check_mesh_dtype
+from ..surface.mesh import SurfaceMesh
 
 
 class FaceBVH(eqx.Module):

@@ -9,7 +9,7 @@
 
 Files are written only where the command line says (`--json`, `--figure`, `--out`),
 relative paths against the current directory; nothing is written by default. Long runs
-show a progress bar on a terminal only (`caustics_jax.progress`).
+show a progress bar on a terminal only (`caustics_jax.runtime.progress`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import os
 import sys
 from pathlib import Path
 
+from .._version import __version__
 from . import compare as cmp
-from ._version import __version__
 
 
 def _fmt(x, spec=".2e"):
@@ -150,8 +150,9 @@ def _check_figure_format(path) -> None:
 
 
 #: Solver lanes per second assumed for the run-time warning: a conservative average over the
-#: comparison's configurations (make demo on 2 CPU cores: 22.6k-574k solves/s each, the slow
-#: ones taking most of the time; docs/solvers.md "Comparison"); compile and reference on top.
+#: comparison's configurations on a 2-core CPU, the slow ones taking most of the time
+#: (docs/solvers.md, "Comparison" and "Measurements behind the code"); compile and
+#: reference on top.
 SOLVES_PER_S = 40_000
 #: Warn when the solver time alone is expected above this (s).
 LONG_RUN_S = 600
@@ -173,7 +174,7 @@ def warn_if_long_compare(cfg) -> str | None:
 
 def _compare(args) -> int:
     if args.cpu_devices is not None:  # before any JAX work: the CPU backend reads it when it starts
-        from .lanes import use_cpu_devices
+        from ..runtime.blocks import use_cpu_devices
 
         use_cpu_devices(_cpu_devices_arg(args.cpu_devices))
     cfg = cmp.CompareConfig(
@@ -219,7 +220,7 @@ def _add_compare_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default="wavy", metavar="NAME|PATH",
                    help=f"a named scene ({', '.join(sorted(cmp.SCENES))}) or a mesh file trimesh reads "
                         f"({', '.join(cmp.MESH_SUFFIXES)}): floor and light placed around it as documented "
-                        "in caustics_jax.compare.scene_from_mesh")
+                        "in caustics_jax.app.compare.scene_from_mesh")
     p.add_argument("--triangles", type=int, default=8192, help="surface tessellation (default: %(default)s)")
     p.add_argument("--n", type=int, default=100_000, help="receiver lanes (default: %(default)s)")
     p.add_argument("--dtype", nargs="+", default=["float32", "float64"],
@@ -253,7 +254,8 @@ def _selection(named, everything) -> list[str] | None:
 #: Largest std430 binary per kernel: a Vulkan storage buffer addresses at most 2^32 bytes
 #: (`maxStorageBufferRange` is a uint32), so a larger `<kernel>.bin` could not be bound.
 MAX_BINARY_BYTES = 2**32 - 1
-#: Export records per second assumed for the warning (measured 2-5k/s on 2 loaded CPU cores).
+#: Export records per second assumed for the warning: the low end of a loaded 2-core CPU's
+#: rate (docs/export.md, "Measurements behind the code").
 EXPORT_RECORDS_PER_S = 2_000
 #: Warn when an export is expected to write more than this or run longer than `LONG_RUN_S`.
 LARGE_EXPORT_BYTES = 2**28
@@ -262,8 +264,8 @@ LARGE_EXPORT_BYTES = 2**28
 def export_size_warning(kernels, count: int, lanes: int, n_scenes: int) -> str | None:
     """Refuse (`ValueError`) a `--count` whose binary no storage buffer can hold; return a
     warning line with the expected size and time when the export is large, else None."""
-    from .export import KERNELS
-    from .export.records import layout
+    from ..export import KERNELS
+    from ..export.records import layout
 
     strides = {k: layout(KERNELS[k].fields)[1] for k in kernels}
     too_big = [k for k, stride in strides.items() if stride * count > MAX_BINARY_BYTES]
@@ -280,7 +282,7 @@ def export_size_warning(kernels, count: int, lanes: int, n_scenes: int) -> str |
 
 
 def _export(args) -> int:
-    from . import export
+    from .. import export
 
     kernels = _selection(args.kernels, export.KERNELS)
     scenes = _selection(args.scenes, export.SCENES)
@@ -307,7 +309,7 @@ def _export(args) -> int:
 
 
 def _conformance(args) -> int:
-    from .shaders import conformance
+    from ..shaders import conformance
 
     if not args.data:  # Path("") would read the current directory
         raise ValueError("data must name the directory `caustics-jax export` wrote, got an empty path")
@@ -318,7 +320,7 @@ def _conformance(args) -> int:
 
 
 def _add_export_args(p: argparse.ArgumentParser) -> None:
-    from .export import KERNELS, SCENES
+    from ..export import KERNELS, SCENES
 
     p.add_argument("--out", required=True, help="output directory (created if missing)")
     p.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL",

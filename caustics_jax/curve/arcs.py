@@ -26,8 +26,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .barycentric import barycentric_point
-from .conic import (
+from ..math.barycentric import barycentric_point
+from ..math.conic import (
+    conic_centre,
     conic_coefficients,
     conic_second_intersection,
     conic_tangent,
@@ -106,12 +107,57 @@ def next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
     # barycentrics (`e` and the root are each off the conic by ~eps |ab|), so the sign of
     # `across` is noise while the sign of `along` is not. Without the absolute bound a
     # float32 root 1e-4 behind `e` read as "ahead at angle 1e-3" (arctan2(-0, -1) wraps
-    # to 0), and the walk went the wrong way in both directions (issue 14 class 6).
+    # to 0), and the walk went the wrong way in both directions.
     on_tangent = on_tangent_line(across, dist, scale)
     phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
     phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
     i = jnp.argmin(phi)
     return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
+
+
+def inward(edge, dtype):
+    """Inward normal of edge `edge` in barycentric space (`INWARD`)."""
+    return jnp.asarray(INWARD, dtype)[jnp.clip(edge, 0, 2)]
+
+
+class ArcStart(NamedTuple):
+    """The arc from a curve point whose tangent is oriented along a direction, to the next
+    edge crossing (`arc_from_point`).
+
+    Attributes:
+        side: the tangent's component along the direction; 0 where the curve runs along
+            it (no arc starts there).
+        tau, perp: the pencil frame of the arc (`orientation`).
+        ok: the next crossing exists (`next_crossing`).
+        edge, t, ab, phi: that crossing's edge, edge parameter, point and pencil angle.
+    """
+
+    side: jax.Array
+    tau: jax.Array
+    perp: jax.Array
+    ok: jax.Array
+    edge: jax.Array
+    t: jax.Array
+    ab: jax.Array
+    phi: jax.Array
+
+    @property
+    def exists(self):
+        """An arc starts here and reaches an edge: `ok` and `side != 0`."""
+        return self.ok & (self.side != 0)
+
+
+def arc_from_point(coef, e, direction, entry_edge=-1, entry_t=0.0, roots=None) -> ArcStart:
+    """The arc from curve point `e`, its tangent oriented along `direction` (a barycentric
+    vector: the inward normal of the entry edge when entering a face), to the next edge
+    crossing (`next_crossing` in the frame of `orientation`); `roots`: the conic's
+    `edge_roots` when the caller has them."""
+    t = conic_tangent(coef, e)
+    side = t @ direction
+    tau, perp = orientation(coef, e, jnp.where(side < 0, -t, t))
+    roots = edge_roots(coef) if roots is None else roots
+    ok, edge, t_next, ab, phi = next_crossing(roots, e, tau, perp, entry_edge, entry_t)
+    return ArcStart(side, tau, perp, ok, edge, t_next, ab, phi)
 
 
 def leaving_at_start(roots, e, tau, crossing):
@@ -239,16 +285,13 @@ def face_arcs(coef) -> FaceArcs:
     for k in range(3):
         for j in range(2):
             x = ab_all[k, j]
-            t = conic_tangent(coef, x)
-            side = t @ jnp.asarray(INWARD[k], t.dtype)
-            tau, perp = orientation(coef, x, jnp.where(side < 0, -t, t))
-            ok, _, _, end, phi = next_crossing(roots, x, tau, perp, k, t_all[k, j])
+            arc = arc_from_point(coef, x, jnp.asarray(INWARD[k], coef.dtype), k, t_all[k, j], roots)
             starts.append(x)
-            ends.append(end)
-            taus.append(tau)
-            perps.append(perp)
-            phi_ends.append(jnp.where(ok, phi, 0))
-            ok_arcs.append(valid_all[k, j] & ok & (side != 0))
+            ends.append(arc.ab)
+            taus.append(arc.tau)
+            perps.append(arc.perp)
+            phi_ends.append(jnp.where(arc.ok, arc.phi, 0))
+            ok_arcs.append(valid_all[k, j] & arc.exists)
     s, s_ok = solve_quadratic(A, C / 3 + D, B / 9 + E / 3 + F)
     anchor = jnp.stack([s[0], jnp.asarray(1 / 3, s.dtype)])
     tau, perp = orientation(coef, anchor, conic_tangent(coef, anchor))
@@ -266,12 +309,8 @@ def conic_touches_face(coef):
     """Does the conic pass through the face? Edge crossings, or an ellipse whose centre lies
     inside the face with the opposite sign of the conic at vertex V0 (seed 001 Fig. 5a)."""
     _, valid, _ = edge_roots(coef)
-    A, B, C, D, E, F = coef
-    det = 4 * A * B - C * C
-    ellipse = det > 0
-    safe = jnp.where(ellipse, det, 1)
-    a_c = (C * E - 2 * B * D) / safe
-    b_c = (C * D - 2 * A * E) / safe
+    a_c, b_c, ellipse = conic_centre(coef)
+    F = coef[5]
     centre_inside = (a_c >= 0) & (b_c >= 0) & (a_c + b_c <= 1)
     centre = jnp.stack([a_c, b_c])
     opposite_sign = conic_value(coef, centre) * F < 0  # F = the conic at vertex V0

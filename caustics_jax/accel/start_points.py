@@ -31,14 +31,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ._precision import check_mesh_dtype, real_input_dtype
+from ..math.crossing import segment_triangle
+from ..runtime.lanes import lane_bucket
+from ..runtime.precision import check_mesh_dtype, real_input_dtype
+from ..surface.frames import on_exact_cells
+from ..surface.grid import detect_grid, grid_layout
+from ..surface.mesh import SurfaceMesh
 from .bvh import FaceBVH, build_bvh, first_hit_bvh
-from .crossing import segment_triangle
 from .face_cells import FaceCells, bin_faces, cells_from_layout, first_hit_cells
-from .frames import on_exact_cells
-from .grid import detect_grid, grid_layout
-from .lanes import lane_bucket
-from .mesh import SurfaceMesh
 
 #: An acceleration structure of the surface queries (`build_accel`).
 Accel = FaceCells | FaceBVH

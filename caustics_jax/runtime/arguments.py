@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 #: The package's directory: frames inside it are not the user's (`warn_user`).
-_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
 
 #: Largest iteration cap (the counters are int32).
 MAX_INT32 = 2**31 - 1
@@ -69,13 +69,16 @@ def check_real(name: str, value, lo: float = -math.inf, hi: float = math.inf, *,
         v = float(value)
         ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok:
-        raise ValueError(f"{name} must be a finite real number in {_interval(lo, hi, lo_open, hi_open)}, "
+        raise ValueError(f"{name} must be a finite real number in {interval(lo, hi, lo_open, hi_open)}, "
                          f"got {value!r}")
     return float(value)
 
 
-def _interval(lo, hi, lo_open, hi_open) -> str:
-    return f"{'(' if lo_open or lo == -math.inf else '['}{lo}, {hi}{')' if hi_open or hi == math.inf else ']'}"
+def interval(lo, hi, lo_open: bool = False, hi_open: bool = False, number=str) -> str:
+    """`[lo, hi]`, `(lo, hi)`, `[0, inf)` as a message writes it (an infinite end is open);
+    `number` formats each end."""
+    return (f"{'(' if lo_open or lo == -math.inf else '['}{number(lo)}, {number(hi)}"
+            f"{')' if hi_open or hi == math.inf else ']'}")
 
 
 def check_tol(name: str, value, *, optional: bool = True):
@@ -190,12 +193,10 @@ def scale_range(dtype) -> tuple[float, float]:
     (`check_scene_scale`): `tiny^(1/5)` and `max^(1/4) / 8` of the dtype, for the quartic
     products of lengths the solvers form (the edge quadratics' discriminants, `D`'s products
     of four lengths) and the fifth powers of their ratios. float32: 2.6e-8 and 5.4e8 m;
-    float64: 2.9e-62 and 1.4e76 m. Measured on the wavy pool scaled uniformly (float32):
-    every lane FOUND for scales 3e-9 .. 3e9 (extent 1.3e-8 m .. coordinates 9e9 m); at a
-    scale of 1e-9 three of 16 lanes, at 3e-10 all, read DEGENERATE, and at 1e10 five read
-    TOTAL_INTERNAL_REFLECTION. The D factor (`ray_differential_D`) overflows sooner: a unit
-    triangle scaled by 3e8 gives `D` to 1.1e-7 of `s^2 D(1)`, scaled by 1e9 it overflows (marked
-    invalid), hence the factor 8 (docs/input_contract.md "Scale")."""
+    float64: 2.9e-62 and 1.4e76 m. The solvers resolve a scene somewhat beyond both ends;
+    the D factor (`ray_differential_D`) overflows sooner than they do, and the factor 8
+    keeps it inside the band (docs/input_contract.md, "Scale" and "Measurements behind the
+    code")."""
     info = np.finfo(dtype)
     return float(info.tiny) ** 0.2, float(info.max) ** 0.25 / 8
 
@@ -220,7 +221,7 @@ def check_scene_scale(vertices: np.ndarray, points: tuple, dtype) -> None:
 
 def check_dtype(name: str, value) -> np.dtype:
     """A dtype-like naming float32 or float64 (not yet checked against x64; see
-    `_precision.check_float_dtype`)."""
+    `precision.check_float_dtype`)."""
     try:
         dtype = np.dtype(value)
     except (TypeError, ValueError):

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ._precision import float_inputs
+from ..runtime.kernel_contract import float_inputs
 from .barycentric import barycentric_point, interpolated_normal
 from .conic import conic_coefficients, conic_tangent, tangent_to_world
 from .geometry import dot, norm, refract, safe_normalize

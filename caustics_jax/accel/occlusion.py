@@ -22,8 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool
 
-from ._precision import check_mesh_dtype
-from .mesh import SurfaceMesh
+from ..runtime.precision import check_mesh_dtype
+from ..surface.mesh import SurfaceMesh
 from .prepared import PreparedSurface, prepare
 from .start_points import Accel, first_hit
 

@@ -20,8 +20,8 @@ together). The cache is trusted code: keep it in a directory only you can write 
 `jax.config.update("jax_compilation_cache_dir", ...)`).
 
 The solvers' block programs compile with the project's XLA options (`jit`, `XLA_OPTIONS`:
-XLA:CPU's loop emitters, which compile the walk in 6.1-8.2 s, not 10.2-12.8 s);
-`CAUSTICS_JAX_XLA_OPTIONS=default` keeps XLA's own options.
+XLA:CPU's loop emitters, which compile the walk faster than XLA's default fusion emitters,
+docs/solvers.md "Compilation"); `CAUSTICS_JAX_XLA_OPTIONS=default` keeps XLA's own options.
 
 In memory, every compiled program holds about three memory mappings of the process on
 XLA:CPU until JAX drops it; past Linux's `vm.max_map_count` (65,530 by default) XLA dies
@@ -121,14 +121,10 @@ def release_compiled_programs(fraction: float = 0.5) -> bool:
 #: (`options_from_env`).
 XLA_ENV = "CAUSTICS_JAX_XLA_OPTIONS"
 #: XLA options of the solvers' block programs (`jit`): XLA:CPU's loop emitters instead of
-#: its MLIR fusion emitters (`xla_cpu_use_fusion_emitters`, on by default in this JAX).
-#: Measured on the 2-core CPU, cache off, solver programs of the default pool, both option
-#: sets in one process (`experiments/compile_options.py`, docs/solvers.md "Compilation"):
-#: the walk program's XLA compile 6.1-8.2 s instead
-#: of 10.2-12.8 s, one-step Newton's 2.2-3.1 s instead of 3.0-4.2 s and 10-26% faster
-#: calls, the float32 walk within 4%, the float64 walk 5-14% slower (1.06x and 1.12x
-#: faster in the run after the walk's two-pass pool); statuses identical on 65,536 lanes.
-#: Only CPU programs take them (`jit_kwargs`).
+#: its MLIR fusion emitters (`xla_cpu_use_fusion_emitters`, on by default in this JAX):
+#: the solver programs compile faster and give the same statuses, with calls about as
+#: fast or faster (`experiments/compile_options.py`; docs/solvers.md "Compilation" and
+#: "Measurements behind the code"). Only CPU programs take them (`jit_kwargs`).
 XLA_OPTIONS: dict = {"xla_cpu_use_fusion_emitters": False}
 
 
@@ -158,7 +154,7 @@ def xla_options() -> dict:
 def using_xla_options(options: dict | None) -> Iterator[None]:
     """Programs built inside use `options` (None or `{}`: XLA's defaults): for comparing
     compile options in one process (`experiments/compile_options.py`). The solvers' block
-    programs (`lanes.on_devices`) are built per option set; programs already built keep
+    programs (`blocks.on_devices`) are built per option set; programs already built keep
     theirs."""
     global _xla
     if options is not None and not isinstance(options, dict):
@@ -185,5 +181,5 @@ def jit(fun, platform: str | None = None, **kwargs):
     runs), for top-level programs only: JAX refuses `compiler_options` on a jitted function
     called inside another trace (a kernel inside a user's `jit`), so the package's kernels
     and decorated functions keep XLA's defaults and only the solvers' block programs
-    (`lanes.on_devices`) take these options."""
+    (`blocks.on_devices`) take these options."""
     return jax.jit(fun, **jit_kwargs(platform), **kwargs)

@@ -4,8 +4,8 @@ The exhaustive reference and the all-paths tracer both need every refraction poi
 arc of the conic inside one face (seed 001 §3.4.3, `arcs.face_arcs`). Sampling the signed
 sine `f` on the arc and bracketing its sign changes misses roots: two roots in one sample
 interval cancel, and so does a root next to an orientation flip of `f` (the "line"
-orientation flips at `M0`; issue 16 measured three lanes in 300 of a jittered wave lost
-that way). This module replaces sampling by a polynomial whose roots contain every
+orientation flips at `M0`; docs/solvers.md "The certified reference" counts the lanes a
+sampled reference lost that way). This module replaces sampling by a polynomial whose roots contain every
 solution on the arc, and isolates them with the Bernstein form (Descartes' rule of
 signs), so the count of roots is certain, not a lower bound.
 
@@ -87,9 +87,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .arcs import INWARD, edge_roots, next_crossing, on_tangent_line, orientation
-from .conic import conic_tangent, solve_quadratic
-from .objectives import path_vectors
+from ..math.conic import conic_centre, conic_tangent, solve_quadratic
+from ..math.objectives import path_vectors
+from .arcs import arc_from_point, edge_roots, inward, on_tangent_line, orientation
 
 #: Degree of `G` in the Bernstein basis.
 DEGREE = 12
@@ -193,11 +193,7 @@ def interior_ellipse(coef):
     does; `face_arcs` anchors on `b = 1/3`, which misses a small ellipse off that line)."""
     A, B, C, D, E, F = coef
     _, valid, _ = edge_roots(coef)
-    det = 4 * A * B - C * C
-    ellipse = det > 0
-    safe = jnp.where(ellipse, det, 1)
-    a_c = (C * E - 2 * B * D) / safe
-    b_c = (C * D - 2 * A * E) / safe
+    a_c, b_c, ellipse = conic_centre(coef)
     s, s_ok = solve_quadratic(A, C * b_c + D, B * b_c * b_c + E * b_c + F)
     anchor = jnp.stack([s[0], b_c])
     tau, perp = orientation(coef, anchor, conic_tangent(coef, anchor))
@@ -250,7 +246,8 @@ def face_pieces(coef) -> ArcPiece:
 
     def from_root(k, j):
         x = ab_all[k, j]
-        tau, perp, ok, k_end, t_end, end, phi = arc_from_point(coef, x, inward(k, coef.dtype), k, t_all[k, j])
+        arc = arc_from_point(coef, x, inward(k, coef.dtype), k, t_all[k, j], roots)
+        tau, perp, ok, k_end, t_end, end, phi = arc.tau, arc.perp, arc.exists, arc.edge, arc.t, arc.ab, arc.phi
         same = valid_all[k_end] & (t_all[k_end] == t_end)
         end_index = jnp.where(jnp.any(same), 2 * k_end + jnp.argmax(same), -1)
         return x, tau, perp, jnp.where(ok, phi, 0), end, valid_all[k, j] & ok, end_index, chord_on_conic(coef, x, end)
@@ -269,23 +266,6 @@ def face_pieces(coef) -> ArcPiece:
     straight = straight | cat(chord, jnp.asarray(False))
     p = jax.vmap(pieces_of_arc)(anchor, tau, perp, phi_end, end, straight, ok)
     return jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), p)
-
-
-def arc_from_point(coef, e, direction, entry_edge=-1, entry_t=0.0):
-    """The arc from curve point `e` travelling along `direction` (a barycentric vector, or the
-    inward normal of the entry edge when `entry_edge >= 0`) to the next edge crossing:
-    `(tau, perp, ok, edge, t, ab, phi)` (`arcs.next_crossing` in the frame of
-    `arcs.orientation`)."""
-    t = conic_tangent(coef, e)
-    side = t @ direction
-    tau, perp = orientation(coef, e, jnp.where(side < 0, -t, t))
-    ok, edge, t_next, ab, phi = next_crossing(edge_roots(coef), e, tau, perp, entry_edge, entry_t)
-    return tau, perp, ok & (side != 0), edge, t_next, ab, phi
-
-
-def inward(edge, dtype):
-    """Inward normal of edge `edge` in barycentric space (`arcs.INWARD`)."""
-    return jnp.asarray(INWARD, dtype)[jnp.clip(edge, 0, 2)]
 
 
 def piece_homogeneous(coef, piece: ArcPiece):
@@ -414,7 +394,7 @@ def isolate_roots(G: np.ndarray, delta: np.ndarray, max_depth: int):
     it holds exactly one simple root (else it is narrower than `2^-max_depth` and its
     roots are one candidate). Each round is one jitted call padded to a power of two.
     """
-    from .lanes import padded_index, power_of_two_bucket
+    from ..runtime.lanes import padded_index, power_of_two_bucket
 
     piece = np.arange(len(G))
     x0, x1 = np.zeros(len(G)), np.ones(len(G))
@@ -451,16 +431,15 @@ def isolate_roots(G: np.ndarray, delta: np.ndarray, max_depth: int):
     return cat(out_piece, np.int64), cat(out_x0, np.float64), cat(out_x1, np.float64), cat(out_iso, bool)
 
 
-def refine_root(V, N, P, L, coef, piece: ArcPiece, eta, x0, x1, isolated, iters: int):
+def refine_root(V, N, P, L, coef, piece: ArcPiece, eta, x0, x1, iters: int):
     """The root in `[x0, x1]` of the piece: bisection on the sign of `snell_scalar`.
 
     The interval is first scanned at 9 points for a sign change of `S` (an isolated root of
     `G` that is a solution always makes one; a flat or depth-limited interval may hold one
     too, wide in float32): bisection runs `iters` steps on the first sub-interval with a
     change, else the midpoint is returned (a double root, or a root of `G` that is no
-    solution, which acceptance then rejects). Returns barycentrics `(2,)`. `isolated` is
-    informational: both kinds are refined the same way."""
-    del isolated
+    solution, which acceptance then rejects). Returns barycentrics `(2,)`. Isolated and
+    depth-limited intervals are refined the same way."""
     _, _, w = arc_polynomial(V, N, P, L, coef, piece, eta)
     S = lambda x: snell_scalar(V, N, P, L, piece_point(coef, piece, x), w, eta)  # noqa: E731
     xs = x0 + (x1 - x0) * jnp.linspace(0, 1, 9).astype(jnp.result_type(x0))

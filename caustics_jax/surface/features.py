@@ -31,8 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._precision import check_mesh_dtype
-from .arguments import real_array
+from ..runtime.arguments import real_array
+from ..runtime.precision import check_mesh_dtype
 from .mesh import SurfaceMesh
 
 # Coplanarity and equal-normal tolerances, in units of the mesh dtype's epsilon (relative
@@ -65,7 +65,7 @@ def features(mesh: SurfaceMesh, lights_or_L=None) -> SceneFeatures:
 
     Args:
         mesh: the refractive surface.
-        lights_or_L: `None`, a `caustics_jax.scenes.Lights`, or light positions `(3,)` /
+        lights_or_L: `None`, a `caustics_jax.surface.scenes.Lights`, or light positions `(3,)` /
             `(N, 3)`; validated, but no property of the lights changes what the solvers
             skip today (a directional light is a far point light to them).
 
@@ -93,8 +93,8 @@ def mesh_features(mesh: SurfaceMesh) -> SceneFeatures:
         N_f = N_unit[faces].astype(np.float64)
         return bool(np.all(np.abs(N_f - N_f[:, :1]) <= tol_n))
 
-    # A curved surface fails on its first faces: "auto" then costs O(4096), not O(F)
-    # (155 ms at 1M triangles measured for the full check).
+    # A curved surface fails on its first faces: "auto" then costs O(4096), not the O(F) of
+    # the full check (docs/features.md, "Measurements behind the code").
     constant_normals = constant(F[:4096]) and constant(F)
     return SceneFeatures(
         flat=constant_normals and _is_flat(np.asarray(mesh.vertices, np.float64),
@@ -156,5 +156,5 @@ def check(features_arg) -> None:
     if isinstance(features_arg, str) and features_arg == "auto":
         return
     raise ValueError(
-        f"features must be 'auto', None or a SceneFeatures from caustics_jax.features(mesh), "
+        f"features must be 'auto', None or a SceneFeatures from caustics_jax.surface.features(mesh), "
         f"got {features_arg!r}")

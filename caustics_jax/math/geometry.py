@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from ._precision import float_inputs
+from ..runtime.kernel_contract import float_inputs
 
 
 def dot(u: Float[Array, "*batch 3"], v: Float[Array, "*batch 3"]) -> Float[Array, "*batch"]:
@@ -33,8 +33,9 @@ def safe_normalize(v: Float[Array, "*batch 3"]) -> Float[Array, "*batch 3"]:
     the zero vector too (float32: `|v|` below about 1e-19, whose square the CPU flushes to
     0, or above 1.8e19, whose square is inf). Scenes inside `arguments.scale_range` form no
     such vector except for points closer than 1e-19 m; callers read a zero result as
-    degenerate (`objectives.path_vectors`). A rescaling branch for those lengths was
-    measured: it cost the walk's program 1.5-3 s of compile, so it is left out.
+    degenerate (`objectives.path_vectors`). There is no rescaling branch for those lengths:
+    it would add seconds to the walk's compile (docs/solvers.md, "Measurements behind the
+    code").
     """
     length = norm(v)
     inv = jnp.where(length > 0, 1 / jnp.where(length > 0, length, 1), 0)

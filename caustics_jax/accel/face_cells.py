@@ -30,17 +30,19 @@ coordinates so a face near a wall is listed on both sides.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._precision import check_mesh_dtype
-from .crossing import clip_to_box, face_frames, finite_segments, first_of, triangle_crossing
-from .grid import GridLayout
-from .lanes import LANE_CHUNK, map_lanes
-from .mesh import SurfaceMesh
+from ..math.crossing import clip_to_box, face_frames, finite_segments, first_of, triangle_crossing
+from ..runtime.lanes import LANE_CHUNK, map_lanes
+from ..runtime.precision import check_mesh_dtype
+from ..surface.grid import GridLayout
+from ..surface.mesh import SurfaceMesh
 
 #: Padding of a face's projected box when binning, in ulps of the coordinates' magnitude:
 #: larger than the wall attribution error of the traversal (a few ulps), so a crossing
@@ -220,8 +222,8 @@ def first_hit_cells(mesh: SurfaceMesh, cells: FaceCells, A: Float[Array, "n 3"],
     if chunk is None:  # small chunks pay on a CPU; an accelerator wants every lane at once
         chunk = cpu_chunk(cells.faces.shape[1]) if jax.default_backend() == "cpu" else max(A.shape[0], 1)
     # The mesh's arrays, not the mesh: its static `grid` would key a compile per layout.
-    return _first_hit_cells(mesh.vertices, mesh.faces, cells, A, B, exclude, float(s_lo), float(s_hi), widen,
-                            chunk)  # fmt: skip
+    window = _Window(float(s_lo), float(s_hi), bool(widen))
+    return _first_hit_cells(mesh.vertices, mesh.faces, cells, A, B, exclude, window, chunk)
 
 
 #: Face tests per lockstep step of a CPU chunk (`cpu_chunk`).
@@ -231,23 +233,37 @@ CHUNK_FACE_TESTS = 1024
 def cpu_chunk(cell_faces: int) -> int:
     """Lanes per vmapped chunk of the cell traversal on a CPU, for cells listing up to
     `cell_faces` faces: the largest power of two with `chunk * cell_faces <=
-    CHUNK_FACE_TESTS`, at most `lanes.LANE_CHUNK` (256). Measured (100k floor receivers,
-    32k triangles, overhead and 31-degree light, interleaved medians of 5): the time per
-    lane jumps 2-3x once a step tests more than about 1000 faces (bins of the jittered
-    pool, 7 faces: 0.08-0.12 s at 128 lanes, 0.19-0.29 s at 256; lagoon, 11 faces:
-    0.13-0.18 s at 64, 0.33-0.46 s at 128 and 256), and smaller chunks lose to the
-    per-step overhead (grid, 2 faces: 0.04-0.06 s at 256, 0.08-0.11 s at 32)."""
+    CHUNK_FACE_TESTS`, at most `lanes.LANE_CHUNK` (256): a lockstep step that tests more
+    faces runs several times slower per lane, and smaller chunks lose to the per-step
+    overhead (docs/mesh.md, "Measurements behind the code")."""
     chunk = LANE_CHUNK
     while chunk > 16 and chunk * max(cell_faces, 1) > CHUNK_FACE_TESTS:
         chunk //= 2
     return chunk
 
 
-@eqx.filter_jit
-def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, widen, chunk):
-    A, B = finite_segments(A, B)
+class _Window(NamedTuple):
+    """The segment window `[s_lo, s_hi]` and whether it is widened by rounding (static)."""
+
+    s_lo: float
+    s_hi: float
+    widen: bool
+
+
+class _Slab(NamedTuple):
+    """What every lane of one call shares: the box of the grid (padded), each cell's height
+    range, the faces' edge frames; computed once per call from the traced heights."""
+
+    lo: jax.Array
+    hi: jax.Array
+    cell_lo: jax.Array
+    cell_hi: jax.Array
+    z_scale: jax.Array
+    frames: tuple
+
+
+def _slab(vertices, mesh_faces, cells: FaceCells, dtype) -> _Slab:
     u, v, w = cells.axes
-    dtype = A.dtype
     nu, nv = cells.shape
     # Heights are traced (animated water): one O(V) reduction per call for the slab.
     z = vertices[:, w]
@@ -256,16 +272,12 @@ def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, wid
     us, vs = cells.u_lines, cells.v_lines
     uv_pad = 1e-5 * (jnp.maximum(us[-1] - us[0], vs[-1] - vs[0])
                      + jnp.max(jnp.abs(jnp.stack([us[0], us[-1], vs[0], vs[-1]]))))  # fmt: skip
-    lo, hi = [None] * 3, [None] * 3
+    lo: list = [None] * 3
+    hi: list = [None] * 3
     lo[u], lo[v], lo[w] = us[0] - uv_pad, vs[0] - uv_pad, z_lo - z_pad
     hi[u], hi[v], hi[w] = us[-1] + uv_pad, vs[-1] + uv_pad, z_hi + z_pad
-    lo, hi = jnp.stack(lo).astype(dtype), jnp.stack(hi).astype(dtype)
-    eps = jnp.finfo(dtype).eps
-    margin = 1 if widen else -1
-    # (Widened, the window reaches past s_hi by the rounding of s: keep the slab too.)
-    s_end = jnp.asarray(s_hi + 64 * float(eps) * (1 + abs(s_hi)) if widen else s_hi, dtype)
-    # Height range of each cell's faces (traced heights: one gather of the cell table per
-    # call), for skipping the cells a segment passes entirely above or below.
+    # Height range of each cell's faces (one gather of the cell table per call), for
+    # skipping the cells a segment passes entirely above or below.
     face_z = z[mesh_faces]
     listed = cells.faces >= 0
     listed_face = jnp.maximum(cells.faces, 0)
@@ -273,86 +285,116 @@ def _first_hit_cells(vertices, mesh_faces, cells, A, B, exclude, s_lo, s_hi, wid
     row_hi = jnp.max(jnp.where(listed, face_z.max(1)[listed_face], -jnp.inf), axis=1)
     cell_lo = jax.ops.segment_min(row_lo, cells.owner, num_segments=nu * nv, indices_are_sorted=False)
     cell_hi = jax.ops.segment_max(row_hi, cells.owner, num_segments=nu * nv, indices_are_sorted=False)
-    z_scale = jnp.maximum(jnp.abs(z_lo), jnp.abs(z_hi))
     # Edge vectors and lengths of every face, once per call (traced vertices), gathered
-    # per test (the same faces and points): on 100k lanes of 32k triangles, 1.2-1.3x faster
-    # start points on the lagoon's bins and 1.1x on the jittered pool's than edges per test.
+    # per test: cheaper than edges per test (docs/mesh.md "Measurements behind the code").
     frames = face_frames(vertices[mesh_faces])
+    return _Slab(jnp.stack(lo).astype(dtype), jnp.stack(hi).astype(dtype), cell_lo, cell_hi,
+                 jnp.maximum(jnp.abs(z_lo), jnp.abs(z_hi)), frames)
 
-    def lane(P, Q, exclude):
-        d = Q - P
-        s_in, s_out = clip_to_box(P[None], d[None], lo, hi, s_end[None])
-        s_in, s_out = s_in[0], s_out[0]
-        X = P + s_in * d
-        i = jnp.clip(jnp.searchsorted(us, X[u], side="right") - 1, 0, nu - 1)
-        j = jnp.clip(jnp.searchsorted(vs, X[v], side="right") - 1, 0, nv - 1)
-        step = jnp.sign(jnp.stack([d[u], d[v]])).astype(jnp.int32)
 
-        def wall(k, i, lines):  # parameter where the segment meets the next wall along k
-            moving = step[k] != 0
-            x = lines[jnp.clip(i + (step[k] > 0), 0, lines.shape[0] - 1)]
-            dk = jnp.where(moving, d[(u, v)[k]], 1)
-            return jnp.where(moving, (x - P[(u, v)[k]]) / dk, jnp.inf)
+class _GridStep(NamedTuple):
+    """The 2D DDA of one segment over the cell grid: `P + s d`, stepping `step` per axis."""
 
-        # Skip ahead (cheap steps, no face tests) to the first cell whose height range the
-        # segment meets while inside it. Padded by 256 ulps of the magnitudes, far more than
-        # the rounding of z at the walls: a cell holding a crossing is never skipped.
-        meet_pad = 256 * eps * (jnp.max(jnp.abs(P)) + jnp.max(jnp.abs(d)) + z_scale)
+    P: jax.Array
+    d: jax.Array
+    step: jax.Array
+    us: jax.Array
+    vs: jax.Array
+    axes: tuple
 
-        def skip(state):
-            i, j, s_enter, _, _ = state
-            s_u, s_v = wall(0, i, us), wall(1, j, vs)
-            s_leave = jnp.minimum(s_u, s_v)
-            z0, z1 = P[w] + s_enter * d[w], P[w] + jnp.minimum(s_leave, s_out) * d[w]
-            cell = j * nu + i
-            meets = (jnp.maximum(z0, z1) + meet_pad >= cell_lo[cell]) & (
-                jnp.minimum(z0, z1) - meet_pad <= cell_hi[cell])
-            along_u = s_u <= s_v
-            i_next = jnp.where(along_u, i + step[0], i)
-            j_next = jnp.where(along_u, j, j + step[1])
-            gone = (s_leave > s_out) | (i_next < 0) | (i_next >= nu) | (j_next < 0) | (j_next >= nv)
-            return (jnp.where(meets, i, jnp.clip(i_next, 0, nu - 1)), jnp.where(meets, j, jnp.clip(j_next, 0, nv - 1)),
-                    jnp.where(meets, s_enter, s_leave), meets | gone, ~meets & gone)  # fmt: skip
+    def wall(self, k, i, lines):
+        """Parameter where the segment meets the next wall along grid axis `k` from cell `i`."""
+        a = self.axes[k]
+        moving = self.step[k] != 0
+        x = lines[jnp.clip(i + (self.step[k] > 0), 0, lines.shape[0] - 1)]
+        dk = jnp.where(moving, self.d[a], 1)
+        return jnp.where(moving, (x - self.P[a]) / dk, jnp.inf)
 
-        empty = s_in > s_out
-        i, j, _, _, missed = jax.lax.while_loop(lambda st: ~st[3], skip, (i, j, s_in, empty, empty))
+    def next_cell(self, i, j, s_out, nu: int, nv: int):
+        """`(s_leave, i_next, j_next, gone)`: where the segment leaves cell `(i, j)`, the cell
+        it enters (clipped into the grid), and whether it leaves the grid or the window
+        `s <= s_out` instead."""
+        s_u, s_v = self.wall(0, i, self.us), self.wall(1, j, self.vs)
+        s_leave = jnp.minimum(s_u, s_v)
+        along_u = s_u <= s_v
+        i_next = jnp.where(along_u, i + self.step[0], i)
+        j_next = jnp.where(along_u, j, j + self.step[1])
+        gone = (s_leave > s_out) | (i_next < 0) | (i_next >= nu) | (j_next < 0) | (j_next >= nv)
+        return s_leave, jnp.clip(i_next, 0, nu - 1), jnp.clip(j_next, 0, nv - 1), gone
 
-        def cond(state):
-            return ~state[3]
 
-        def body(state):  # tests one row of a cell's faces; a continued list stays in the cell
-            i, j, row, _, best, face, ab, s_best = state
-            faces = cells.faces[row]
-            c = triangle_crossing(P[None], d[None], jax.tree.map(lambda x: x[jnp.maximum(faces, 0)], frames))
-            ok = (c.inside & (faces >= 0) & (faces != exclude)
-                  & (c.s >= s_lo - margin * c.s_tol) & (c.s <= s_hi + margin * c.s_tol))  # fmt: skip
-            r_first, f_first, ab_first, s_first = first_of(c.rank()[None], ok[None], faces[None],
-                                                           c.ab[None], c.s[None])  # fmt: skip
-            better = r_first[0] < best
-            best = jnp.where(better, r_first[0], best)
-            face = jnp.where(better, f_first[0], face)
-            ab = jnp.where(better, ab_first[0], ab)
-            s_best = jnp.where(better, s_first[0], s_best)
-            s_u, s_v = wall(0, i, us), wall(1, j, vs)
-            s_leave = jnp.minimum(s_u, s_v)
-            along_u = s_u <= s_v
-            i_next = jnp.where(along_u, i + step[0], i)
-            j_next = jnp.where(along_u, j, j + step[1])
-            done = (best <= s_leave) | (s_leave > s_out) | (i_next < 0) | (i_next >= nu) | (j_next < 0) | (
-                j_next >= nv)
-            i_next, j_next = jnp.clip(i_next, 0, nu - 1), jnp.clip(j_next, 0, nv - 1)
-            cont = cells.more[row]
-            stay = cont >= 0
-            return (jnp.where(stay, i, i_next), jnp.where(stay, j, j_next),
-                    jnp.where(stay, cont, j_next * nu + i_next), done & ~stay, best, face, ab, s_best)
+def _first_hit_lane(cells: FaceCells, slab: _Slab, window: _Window, s_end, P, Q, exclude):
+    """The cell traversal of one lane (module docstring): `(face, ab, s)`."""
+    u, v, w = cells.axes
+    nu, nv = cells.shape
+    us, vs = cells.u_lines, cells.v_lines
+    dtype = P.dtype
+    eps = jnp.finfo(dtype).eps
+    margin = 1 if window.widen else -1
+    d = Q - P
+    s_in, s_out = clip_to_box(P[None], d[None], slab.lo, slab.hi, s_end[None])
+    s_in, s_out = s_in[0], s_out[0]
+    X = P + s_in * d
+    i = jnp.clip(jnp.searchsorted(us, X[u], side="right") - 1, 0, nu - 1)
+    j = jnp.clip(jnp.searchsorted(vs, X[v], side="right") - 1, 0, nv - 1)
+    grid = _GridStep(P, d, jnp.sign(jnp.stack([d[u], d[v]])).astype(jnp.int32), us, vs, (u, v))
 
-        inf = jnp.asarray(jnp.inf, dtype)
-        init = (i, j, j * nu + i, missed, inf, jnp.asarray(-1, jnp.int32), jnp.zeros(2, dtype), inf)
-        *_, face, ab, s_best = jax.lax.while_loop(cond, body, init)
-        return face, ab, s_best
+    # Skip ahead (cheap steps, no face tests) to the first cell whose height range the
+    # segment meets while inside it. Padded by 256 ulps of the magnitudes, far more than
+    # the rounding of z at the walls: a cell holding a crossing is never skipped.
+    meet_pad = 256 * eps * (jnp.max(jnp.abs(P)) + jnp.max(jnp.abs(d)) + slab.z_scale)
 
+    def skip(state):
+        i, j, s_enter, _, _ = state
+        s_leave, i_next, j_next, gone = grid.next_cell(i, j, s_out, nu, nv)
+        z0, z1 = P[w] + s_enter * d[w], P[w] + jnp.minimum(s_leave, s_out) * d[w]
+        cell = j * nu + i
+        meets = (jnp.maximum(z0, z1) + meet_pad >= slab.cell_lo[cell]) & (
+            jnp.minimum(z0, z1) - meet_pad <= slab.cell_hi[cell])
+        return (jnp.where(meets, i, i_next), jnp.where(meets, j, j_next), jnp.where(meets, s_enter, s_leave),
+                meets | gone, ~meets & gone)
+
+    empty = s_in > s_out
+    i, j, _, _, missed = jax.lax.while_loop(lambda st: ~st[3], skip, (i, j, s_in, empty, empty))
+
+    def body(state):  # tests one row of a cell's faces; a continued list stays in the cell
+        i, j, row, _, best, face, ab, s_best = state
+        faces = cells.faces[row]
+        c = triangle_crossing(P[None], d[None], jax.tree.map(lambda x: x[jnp.maximum(faces, 0)], slab.frames))
+        ok = (c.inside & (faces >= 0) & (faces != exclude)
+              & (c.s >= window.s_lo - margin * c.s_tol) & (c.s <= window.s_hi + margin * c.s_tol))  # fmt: skip
+        r_first, f_first, ab_first, s_first = first_of(c.rank()[None], ok[None], faces[None],
+                                                       c.ab[None], c.s[None])  # fmt: skip
+        better = r_first[0] < best
+        best = jnp.where(better, r_first[0], best)
+        face = jnp.where(better, f_first[0], face)
+        ab = jnp.where(better, ab_first[0], ab)
+        s_best = jnp.where(better, s_first[0], s_best)
+        s_leave, i_next, j_next, gone = grid.next_cell(i, j, s_out, nu, nv)
+        done = (best <= s_leave) | gone
+        cont = cells.more[row]
+        stay = cont >= 0
+        return (jnp.where(stay, i, i_next), jnp.where(stay, j, j_next),
+                jnp.where(stay, cont, j_next * nu + i_next), done & ~stay, best, face, ab, s_best)
+
+    inf = jnp.asarray(jnp.inf, dtype)
+    init = (i, j, j * nu + i, missed, inf, jnp.asarray(-1, jnp.int32), jnp.zeros(2, dtype), inf)
+    *_, face, ab, s_best = jax.lax.while_loop(lambda state: ~state[3], body, init)
+    return face, ab, s_best
+
+
+@eqx.filter_jit
+def _first_hit_cells(vertices, mesh_faces, cells: FaceCells, A, B, exclude, window: _Window, chunk: int):
+    A, B = finite_segments(A, B)
+    dtype = A.dtype
+    slab = _slab(vertices, mesh_faces, cells, dtype)
+    eps = jnp.finfo(dtype).eps
+    # (Widened, the window reaches past s_hi by the rounding of s: keep the slab too.)
+    s_hi = window.s_hi
+    s_end = jnp.asarray(s_hi + 64 * float(eps) * (1 + abs(s_hi)) if window.widen else s_hi, dtype)
     exclude = jnp.full(A.shape[0], -1, jnp.int32) if exclude is None else exclude
-    return map_lanes(lane, A, B, exclude, chunk=chunk)
+    return map_lanes(lambda P, Q, x: _first_hit_lane(cells, slab, window, s_end, P, Q, x), A, B, exclude,
+                     chunk=chunk)
 
 
 __all__ = ["CHUNK_FACE_TESTS", "FaceCells", "bin_faces", "cells_from_layout", "cpu_chunk", "first_hit_cells"]

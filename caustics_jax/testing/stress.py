@@ -1,4 +1,4 @@
-"""Adversarial configurations for the stress suite (issue 7), seeded numpy, float64.
+"""Adversarial configurations for the stress suite (docs/stability.md), seeded numpy, float64.
 
 Each category is one surface plus a batch of refracted paths planted on it (MATH.md §4
 "verify with planted solutions"): a face, a barycentric point `ab` and the receiver `P`
@@ -39,11 +39,11 @@ import dataclasses
 
 import numpy as np
 
-from . import scenes
-from ._precision import precision
-from .mesh import GridInfo, SurfaceMesh
-from .testing import path_endpoints, planted_mesh_paths
-from .testing.oracle import NumpyMesh, barycentric_point, shading_normal, unit
+from ..runtime.precision import precision
+from ..surface import scenes
+from ..surface.mesh import GridInfo, SurfaceMesh
+from . import path_endpoints, planted_mesh_paths
+from .oracle import NumpyMesh, barycentric_point, shading_normal, unit
 
 ETA = 1.333
 CRITICAL = float(np.arcsin(1 / ETA))  # critical angle on P's (water) side, rad

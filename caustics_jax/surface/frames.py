@@ -1,10 +1,10 @@
 """Where a mesh is solved: the local origin of a mesh far from the coordinate origin, and
 whether its regular grid (`SurfaceMesh.grid`) still describes its vertices.
 
-float32 keeps about 7 digits of a coordinate. Solved where it lies, the 512-triangle wavy
-pool (edges 0.26 m) moved by `(300, -300, 0)` m found 45 of 256 lanes in float32 (TIR 55,
-LEFT_MESH 17, NOT_CONVERGED 139: noise in `f`, not physics) and 1 of 256 at 3 km, against
-256 of 256 solved about its centre. `prepare(mesh)` therefore runs the solvers on
+float32 keeps about 7 digits of a coordinate: a mesh solved where it lies, hundreds of
+metres from the origin, loses the digits its triangles need, and most of its lanes end in
+TIR, LEFT_MESH or NOT_CONVERGED from noise in `f`, not physics (docs/input_contract.md,
+"Scale" and "Measurements behind the code"). `prepare(mesh)` therefore runs the solvers on
 `local_mesh(mesh, local_origin(...))` and moves the points back (`prepared.py`).
 
 The start points trust a grid's exact cells (`start_points.grid_cells`): a crossing near a
@@ -51,10 +51,11 @@ def grid_state(mesh: SurfaceMesh) -> str:
     - `"rounded"`: off by the rounding of an earlier dtype or position (within
       `STALE_GRID` of a spacing or `STALE_ULPS` float32 spacings): a float32 grid cast with
       `astype("float64")`, or a float32 grid 300 m away moved near the origin (1.5e-5 m off
-      the cells there); a crossing within that of a cell wall was lost (2 of 2000 lanes
-      near walls at 3 km, 19 at 10 km), so the start points bin the faces;
+      the cells there); the exact cells lose a crossing within that of a cell wall
+      (docs/input_contract.md, "Measurements behind the code"), so the start points bin
+      the faces;
     - `"stale"`: farther: the xy changed after the grid was built (`eqx.tree_at` on
-      `vertices`; a pool moved by 1 m had found no start point on any lane, silently
+      `vertices`; on the grid's cells a moved pool finds no start point, silently
       NO_CROSSING). The faces are binned too, and `prepare` warns.
     """
     g = mesh.grid

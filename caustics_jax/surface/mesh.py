@@ -21,9 +21,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from ._precision import check_float_dtype, check_mesh_dtype, default_float_dtype, float_inputs
-from .arguments import check_choice, check_real, real_array, warn_user
-from .barycentric import edge_barycentric, edge_param_from_vertex_order
+from ..math.barycentric import edge_barycentric, edge_param_from_vertex_order
+from ..runtime.arguments import check_choice, check_real, real_array, warn_user
+from ..runtime.kernel_contract import float_inputs
+from ..runtime.precision import check_float_dtype, check_mesh_dtype, default_float_dtype
 
 _MAX_NAMED = 10  # how many offending indices an error message lists
 
@@ -121,7 +122,7 @@ class SurfaceMesh(eqx.Module):
         """
         check_choice("normal_weighting", normal_weighting, ("angle", "area"))
         if grid is not None and not isinstance(grid, GridInfo):
-            raise ValueError(f"grid must be None or a caustics_jax.mesh.GridInfo, got {type(grid).__name__}")
+            raise ValueError(f"grid must be None or a caustics_jax.surface.mesh.GridInfo, got {type(grid).__name__}")
         V64, F = _validate_geometry(vertices, faces)
         dtype = default_float_dtype(vertices, dtype)
         _check_fits(V64, dtype)

@@ -32,16 +32,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import scenes
-from ._precision import precision
-from .arguments import check_bool, check_eta, check_fits, check_int, check_scene_scale
-from .progress import progress
+from ..accel.start_points import start_points
+from ..runtime.arguments import check_bool, check_eta, check_fits, check_int, check_scene_scale
+from ..runtime.precision import precision
+from ..runtime.progress import progress
+from ..solvers import solve
+from ..solvers.options import default_tol
+from ..surface import scenes
+from ..surface.scenes import MAX_TRIANGLES
+from ..testing.oracle import NumpyMesh, barycentric_point, refraction_angle_error
 from .reporting import log, stats
-from .scenes import MAX_TRIANGLES
-from .solvers import solve
-from .solvers.walk import default_tol
-from .start_points import start_points
-from .testing.oracle import NumpyMesh, barycentric_point, refraction_angle_error
 
 MAX_REFERENCE_FACES = 20_000
 
@@ -61,7 +61,8 @@ CONFIGS: dict[str, tuple[str, dict]] = {
     "newton-hv-step": ("newton", {"stepping": "one_step", "constraint": "half_vector"}),
     "newton-ad-step": ("newton", {"stepping": "one_step", "constraint": "angle_difference"}),
     "newton-hv-step-gentle": ("newton", {"stepping": "one_step", "constraint": "half_vector", "initial_step": 0.1}),
-    # The previous lane scheduler (fixed chunks of 256 lanes, each until its slowest lane).
+    # The chunked lane scheduler (fixed chunks of 256 lanes, each until its slowest lane), the
+    # baseline the slot pool is compared with.
     "walk-chunked": ("walk", {"scheduler": "chunked"}),
     "newton-hv-chunked": ("newton", {"solver": "newton", "constraint": "half_vector", "scheduler": "chunked"}),
 }
@@ -125,7 +126,7 @@ def load_scene(scene: str, n_triangles: int = 8192, dtype="float64") -> scenes.S
         return SCENES[scene](n_triangles, dtype)
     import trimesh
 
-    from .mesh import SurfaceMesh
+    from ..surface.mesh import SurfaceMesh
 
     path = Path(scene).expanduser()
     if not path.is_file():
@@ -227,7 +228,7 @@ def scene_arrays(cfg: CompareConfig):
 def _timed(fn, repeats: int):
     """`(out, compile_s, steady_s, cached)`: compile time = first call minus the median
     steady call; `cached` says the first call loaded its programs from JAX's persistent
-    compilation cache (`caustics_jax.compilation`) and compiled none that JAX would cache
+    compilation cache (`caustics_jax.runtime.compilation`) and compiled none that JAX would cache
     (one taking over `jax_persistent_cache_min_compile_time_secs`, 1 s), so `compile_s` is
     a load time then. A first call that loaded some programs and compiled a solver's
     (after a code change) is not `cached`: its compile time is real."""

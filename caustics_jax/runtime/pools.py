@@ -1,0 +1,179 @@
+"""The slot-pool scheduler: lanes stepped in a fixed pool of slots refilled from a queue
+(`run_pool`, `run_pools`), and work on the compacted lanes that need it (`map_where`).
+
+Inside a block, a vmapped `while_loop` runs until its slowest lane ends. `run_pool`
+avoids that waste: a fixed pool of slots (`pool_slots`, sized to the backend) steps the
+lanes in flight, and a slot whose lane ended takes the next unfinished lane from a queue,
+so every step advances `slots` live lanes until the queue is empty. Work that few lanes
+need (`map_where`) runs on the compacted lanes that need it, in chunks, so its cost is
+proportional to those lanes.
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+import jax.numpy as jnp
+
+from .lanes import LanePacking, select_lanes, take_rows
+
+
+def pool_slots(platform: str | None = None) -> int:
+    """Lanes in flight per device in `run_pool` (env `CAUSTICS_JAX_POOL_SLOTS`).
+
+    CPU: 256, the chunk width of `map_lanes`, so both schedulers run the same vmapped
+    step and give the same results (the 4096 lanes of `tests/test_scheduling.py` bit-identical,
+    also on an AVX-512 CPU; lanes that `map_where` compacts may round differently by a few
+    eps, `testing.assert_same_lanes`; XLA CPU vectorises wider steps differently:
+    1024 slots moved float32 points by up to 1.5e-4 of a barycentric unit, and ran
+    slower). GPU: 512 lanes per streaming multiprocessor (`core_count`; 65536 when the
+    backend does not report it), enough resident lanes to hide memory latency; TPU: 8192.
+    """
+    env = os.environ.get("CAUSTICS_JAX_POOL_SLOTS")
+    if env:
+        return int(env)
+    device = jax.local_devices()[0] if platform is None else None
+    platform = platform or device.platform
+    if platform in ("gpu", "cuda", "rocm"):
+        cores = getattr(device, "core_count", None) if device is not None else None
+        return 512 * int(cores) if cores else 65536
+    return 8192 if platform == "tpu" else 256
+
+
+def run_pool(step, states, running, slots: int):
+    """Step every running lane until it ends, `slots` lanes at a time (inside jit).
+
+    `states`: a pytree of per-lane states with a leading lane axis `n`; `running` `(n,)`:
+    the lanes that need steps (the others are returned unchanged). `step(state) ->
+    (state, done)` advances one lane (vmapped over the slots). A slot whose lane is done
+    writes it back and takes the next running lane from the queue; the loop ends when the
+    queue is empty and every slot is idle. Each lane sees exactly the `step` calls it
+    would see alone, so the results are those of a per-lane `while_loop`; the vmapped
+    step runs on `slots` lanes in flight (idle slots only in the final drain), instead
+    of a chunk waiting for its slowest lane.
+    """
+    n = running.shape[0]
+    slots = min(slots, n)
+    queue = jnp.nonzero(running, size=n, fill_value=n)[0].astype(jnp.int32)  # n: none left
+    lane = queue[:slots]
+    packing = LanePacking(states)
+
+    def body(carry):
+        states, lane, slot, head = carry
+        stepped, done = jax.vmap(step)(packing.unpack(slot))
+        slot = packing.pack(stepped)
+        finished = (lane < n) & done
+        states = tuple(x.at[jnp.where(finished, lane, n)].set(s, mode="drop") for x, s in zip(states, slot,
+                                                                                              strict=True))
+        pos = head + jnp.cumsum(finished, dtype=jnp.int32) - 1  # queue position of each refill
+        refill = jnp.where(pos < n, queue[jnp.clip(pos, 0, n - 1)], n)
+        lane = jnp.where(finished, refill, lane)
+        slot = select_lanes(finished, take_rows(states, lane), slot)
+        return states, lane, slot, head + jnp.sum(finished, dtype=jnp.int32)
+
+    packed = packing.pack(states)
+    carry = (packed, lane, take_rows(packed, lane), jnp.int32(slots))
+    return packing.unpack(jax.lax.while_loop(lambda c: jnp.any(c[1] < n), body, carry)[0])
+
+
+def run_pools(steps: tuple, route, states, slots: int):
+    """`run_pool` with one pool per kind of step: a lane runs in the pool its state routes
+    it to, so each step computes only its own branch (inside jit).
+
+    `steps[k](state) -> state` is the step of pool `k`; `route(state)` is the pool a lane
+    needs next (int32 in `[0, len(steps))`), or -1 once it is done. Each pool has `slots`
+    slots and a ring-buffer queue of the lanes routed to it; after every trip the lanes
+    whose route changed are written back and queued for their next pool (or leave when
+    done), and every pool refills its free slots from its queue. A pool without a busy
+    slot skips its step (`lax.cond`). A lane sees the same sequence of steps as in a
+    per-lane loop that branches on its state, so the results are those of that loop; a
+    branch that few lanes need costs only those lanes' slots.
+
+    """
+    n = jax.tree.leaves(states)[0].shape[0]
+    K = len(steps)
+    slots = min(slots, n)
+    first = jax.vmap(route)(states)
+    packing = LanePacking(states)
+    states = packing.pack(states)
+    bufs, tails, lanes_ = [], [], []
+    for k in range(K):
+        members = first == k
+        bufs.append(jnp.nonzero(members, size=n, fill_value=n)[0].astype(jnp.int32))
+        tails.append(jnp.sum(members, dtype=jnp.int32))
+        lanes_.append(jnp.where(jnp.arange(slots) < tails[k], bufs[k][:slots], n))
+    heads = [jnp.minimum(jnp.int32(slots), t) for t in tails]
+    carry = (states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_),
+             tuple(take_rows(states, lane) for lane in lanes_))
+
+    def cond(c):
+        _, _, heads, tails, lanes_, _ = c
+        return jnp.any(jnp.stack([jnp.any(lane < n) for lane in lanes_]
+                                 + [h < t for h, t in zip(heads, tails, strict=True)]))
+
+    def body(c):
+        states, (bufs, heads, tails, lanes_, slot_states) = c[0], (list(x) for x in c[1:])
+        for k in range(K):
+            busy = lanes_[k] < n
+            stepped = jax.lax.cond(jnp.any(busy), lambda s, k=k: packing.pack(jax.vmap(steps[k])(packing.unpack(s))),
+                                   lambda s: s, slot_states[k])
+            to = jax.vmap(route)(packing.unpack(stepped))
+            leave = busy & (to != k)
+            target = jnp.where(leave, lanes_[k], n)  # n: dropped
+            states = tuple(x.at[target].set(s, mode="drop") for x, s in zip(states, stepped, strict=True))
+            for j in range(K):
+                if j == k:
+                    continue
+                move = leave & (to == j)
+                pos = (tails[j] + jnp.cumsum(move, dtype=jnp.int32) - 1) % n
+                bufs[j] = bufs[j].at[jnp.where(move, pos, n)].set(lanes_[k], mode="drop")
+                tails[j] = tails[j] + jnp.sum(move, dtype=jnp.int32)
+            lanes_[k] = jnp.where(leave, n, lanes_[k])
+            slot_states[k] = stepped
+        for k in range(K):
+            free = lanes_[k] >= n
+            pos = heads[k] + jnp.cumsum(free, dtype=jnp.int32) - 1
+            fill = free & (pos < tails[k])
+            lanes_[k] = jnp.where(fill, bufs[k][pos % n], lanes_[k])
+            heads[k] = heads[k] + jnp.minimum(jnp.sum(free, dtype=jnp.int32), tails[k] - heads[k])
+            slot_states[k] = select_lanes(fill, take_rows(states, lanes_[k]), slot_states[k])
+        return states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_), tuple(slot_states)
+
+    return packing.unpack(jax.lax.while_loop(cond, body, carry)[0])
+
+
+def map_where(fn, need, out, *args, chunk: int):
+    """`out` with lanes `need` replaced by `vmap(fn)(*args)` at those lanes (inside jit).
+
+    Computed on the compacted lanes that need it, `chunk` at a time, in a loop of
+    `ceil(count / chunk)` trips: the cost is proportional to the lanes that need `fn`, not
+    to the batch (a rare branch under a plain `vmap` is paid by every lane). `out` and
+    `args` move as one matrix per dtype (`LanePacking`): one scatter and one gather per
+    dtype per trip, not one per leaf. `out=None`: zeros of `fn`'s output where `need` is
+    False. `fn` is traced once either way (the loop body reuses the trace that gave the
+    output's shape: a second trace of a large `fn` costs seconds of a first call).
+    """
+    n = need.shape[0]
+    idx = jnp.nonzero(need, size=n, fill_value=n)[0].astype(jnp.int32)
+    idx = jnp.concatenate([idx, jnp.full(chunk, n, jnp.int32)])
+    trips = (jnp.sum(need, dtype=jnp.int32) + chunk - 1) // chunk
+
+    arg_packing = LanePacking(args)
+    packed_args = arg_packing.pack(args)  # once, outside the loop
+    batched = jax.jit(jax.vmap(fn))  # a nested jit caches its trace by argument shapes
+
+    def apply(sel):
+        return batched(*arg_packing.unpack(take_rows(packed_args, sel)))
+
+    if out is None:
+        shapes = jax.eval_shape(apply, idx[:chunk])
+        out = jax.tree.map(lambda x: jnp.zeros((n, *x.shape[1:]), x.dtype), shapes)
+    packing = LanePacking(out)
+
+    def body(i, packed):
+        res = apply(sel := jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,)))
+        res = jax.tree.map(lambda o, r: r.astype(o.dtype), out, res)
+        return tuple(o.at[sel].set(r, mode="drop") for o, r in zip(packed, packing.pack(res), strict=True))
+
+    return packing.unpack(jax.lax.fori_loop(0, trips, body, packing.pack(out)))

@@ -1,0 +1,91 @@
+"""The package reproduces the baseline lanes exactly: same statuses, triangles, iterations
+and found flags, bit-identical points and barycentrics.
+
+The data in tests/data/baseline_1baafa6.npz was recorded from commit 1baafa6 by
+tools/record_baseline.py; the test builds the same cases with that script's functions
+(`scene_lanes`, `solve_case`: three scenes in float32 and float64, each solved by the walk
+and by one-step Newton, one solve per case). Regenerate the data with that script only
+when a change alters results on purpose, and say so in the commit.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+
+import numpy as np
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data" / "baseline_1baafa6.npz"
+
+
+def _load_tool():
+    spec = importlib.util.spec_from_file_location("record_baseline", ROOT / "tools" / "record_baseline.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+record_baseline = _load_tool()
+
+
+@pytest.fixture(scope="module")
+def baseline():
+    with np.load(DATA, allow_pickle=False) as data:
+        return dict(data)
+
+
+def _bits(x: np.ndarray) -> np.ndarray:
+    """Floats as unsigned integers of their width, so that equal means bit-identical."""
+    return x.view(f"u{x.itemsize}") if x.dtype.kind == "f" else x
+
+
+def _mismatch(expected: np.ndarray, actual: np.ndarray) -> str | None:
+    """What differs between a recorded and a recomputed per-lane field (None: nothing)."""
+    if expected.dtype != actual.dtype or expected.shape != actual.shape:
+        return f"{actual.dtype}{actual.shape}, recorded {expected.dtype}{expected.shape}"
+    same = (_bits(expected) == _bits(actual)).reshape(len(expected), -1).all(1)
+    if same.all():
+        return None
+    lanes = np.flatnonzero(~same)
+    return f"{lanes.size} of {len(same)} lanes differ, first {lanes[:5].tolist()}"
+
+
+def _check_case(baseline, scene, dtype, mesh, P, L):
+    """Failures of one scene and dtype: inputs, then every field of every configuration."""
+    key = f"{scene}/{dtype}"
+    failures = []
+    if str(baseline[f"{key}/mesh_sha256"]) != record_baseline.mesh_digest(mesh):
+        failures.append(f"{key}: the mesh differs from the recorded one")
+    for name, value in (("P", P), ("L", L)):
+        if (problem := _mismatch(baseline[f"{key}/{name}"], np.asarray(value))) is not None:
+            failures.append(f"{key}/{name} (input): {problem}")
+    for config in record_baseline.METHODS:
+        result = record_baseline.solve_case(mesh, P, L, config)  # one solve per configuration
+        for field in record_baseline.FIELDS:
+            problem = _mismatch(baseline[f"{key}/{config}/{field}"], result[field])
+            if problem is not None:
+                failures.append(f"{key}/{config}/{field}: {problem}")
+    return failures
+
+
+@pytest.mark.parametrize("dtype", record_baseline.DTYPES)
+@pytest.mark.parametrize("scene", record_baseline.SCENES)
+def test_solve_reproduces_the_baseline_lanes(baseline, scene, dtype):
+    mesh, P, L = record_baseline.scene_lanes(scene, dtype)
+    failures = _check_case(baseline, scene, dtype, mesh, P, L)
+    assert not failures, "\n".join(failures)
+
+
+def test_the_baseline_covers_every_case(baseline):
+    """The data holds each scene, dtype and configuration, and more than FOUND lanes."""
+    statuses = set()
+    for scene in record_baseline.SCENES:
+        for dtype in record_baseline.DTYPES:
+            for config in record_baseline.METHODS:
+                status = baseline[f"{scene}/{dtype}/{config}/status"]
+                assert status.shape == (len(baseline[f"{scene}/{dtype}/P"]),)
+                assert baseline[f"{scene}/{dtype}/{config}/point"].dtype == np.dtype(dtype)
+                statuses |= set(np.unique(status).tolist())
+    assert len(statuses) >= 3
