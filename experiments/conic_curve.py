@@ -2,7 +2,7 @@
 # # The coplanarity curve across a wavy mesh (seed 001 Fig. 3)
 #
 # Question: what does the set of points `M` with `n~(a, b) . (PL x PM) = 0` (seed 001
-# eq. 9-12, MATH.md §2) look like on a small wavy water surface, and does the curve walk
+# eq. 9-12, math.md §2) look like on a small wavy water surface, and does the curve walk
 # (`caustics_jax.solve`) really travel along it from the start point `M0 = PL ∩ surface`
 # to the refraction point `M`?
 #

@@ -4,7 +4,7 @@
 # Question: what does the shader port of the solver cost per receiver, next to the testbed?
 # Both run the whole per-lane pipeline of an exported scene (docs/export.md "Scenes"): the
 # start point (grid DDA on a heightfield, a first-crossing search on a general mesh), the
-# curve walk of seed 001 §3.4 in float32, D (eq. 26-33) and the irradiance (eq. 25, MATH.md
+# curve walk of seed 001 §3.4 in float32, D (eq. 26-33) and the irradiance (eq. 25, math.md
 # §6) at the found point.
 #
 # - JAX: `solve(..., method=Walk(), features=None)` (start points included) and

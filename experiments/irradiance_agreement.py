@@ -2,7 +2,7 @@
 # # Caustic irradiance three ways: walk + D, photon differentials, brute-force photons
 #
 # Question: does the irradiance of a solved path, `E = eta^2 T cos(theta_P) I_e / D`
-# (seed 001 eq. 25-33 with the factors of MATH.md §6), agree with forward light transport?
+# (seed 001 eq. 25-33 with the factors of math.md §6), agree with forward light transport?
 #
 # - (a) walk + D: `caustics_jax.irradiance` at 3 x 3 midpoints per receiver cell, averaged;
 # - (b) photon differentials: photons on a 512^2 light-view texel grid, each with its exact

@@ -1,5 +1,5 @@
 # %% [markdown]
-# # Approximation errors of the real-time pipeline kernels (MATH.md §8)
+# # Approximation errors of the real-time pipeline kernels (math.md §8)
 #
 # Three questions, one figure or table each:
 #

@@ -74,7 +74,7 @@ def _nonfinite(*arrays):
 
 # %% kernels
 def _path_frame(V, N, P, L, ab):
-    """`M`, `n_s`, `n~`, `w_P` in float64 numpy (MATH.md §1), for the kernels' direct inputs."""
+    """`M`, `n_s`, `n~`, `w_P` in float64 numpy (math.md §1), for the kernels' direct inputs."""
     M, n_t = oracle.barycentric_point(V, ab), oracle.interpolated_normal(N, ab)
     return M, oracle.unit(n_t), n_t, oracle.unit(P - M)
 

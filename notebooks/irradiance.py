@@ -15,7 +15,7 @@
 # # Caustic irradiance: the walk and D against photons
 #
 # The irradiance of a solved path, `E = eta^2 T cos(theta_P) I_e / D` (seed 001 eq. 25-33
-# with the factors of MATH.md §6; `caustics_jax.irradiance`), against forward light
+# with the factors of math.md §6; `caustics_jax.irradiance`), against forward light
 # transport: brute-force photons traced through the same mesh and binned on the floor
 # (`caustics_jax.photon_irradiance`), on
 #

@@ -21,7 +21,7 @@
 #    planted, adversarial; docs/export.md), how far is the package's float32 evaluation
 #    from the float64 reference computed from the same float32-rounded inputs, in units of
 #    the tolerance written into the manifest? Every bar below 1 passes.
-# 2. **The seeds' approximations against exact formulas** (docs/kernels.md, MATH.md §8;
+# 2. **The seeds' approximations against exact formulas** (docs/kernels.md, math.md §8;
 #    `experiments/kernel_approximations.py` is the full study): seed 004's Schlick-like
 #    Fresnel (eq. 14) against exact Fresnel, seed 002's projected photon position
 #    (eq. 3.3) against the exact ray-plane intersection, and seed 004's same-t'
@@ -115,7 +115,7 @@ plt.show()
 # ## 2a. Schlick-like Fresnel (seed 004 eq. 14) against exact Fresnel, air to water
 #
 # `F_frac = ((eta - 1)/(eta + 1))^2`, `F_exp = 5`; exact: the unpolarised dielectric
-# Fresnel reflectance of `caustics_jax.fresnel_reflectance` (MATH.md §6).
+# Fresnel reflectance of `caustics_jax.fresnel_reflectance` (math.md §6).
 
 # %%
 ETA = 1.333

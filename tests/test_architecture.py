@@ -231,3 +231,33 @@ def test_every_name_in_the_code_map_exists():
         if not (ROOT / path).exists() or (test and not _defines(ROOT / path, test)):
             missing.append(f"{path}::{test}" if test else path)
     assert missing == []
+
+
+def _math_sections() -> set[str]:
+    """Section numbers of docs/math.md: `## 2. ...` gives "2", `### 2.3 ...` gives "2.3"."""
+    text = (ROOT / "docs" / "math.md").read_text()
+    return set(re.findall(r"^#{2,3} (\d+(?:\.\d+)?)\.?\s", text, flags=re.M))
+
+
+def test_every_math_citation_resolves_to_a_section_of_the_projects_math_reference():
+    """The project stands on its own: every `math.md §N` in the package, the docs, the README,
+    the tests and experiments names a section of docs/math.md, no file points outside the
+    repository (`../shared`), and every "seed NNN" cited in the package is in the
+    bibliography."""
+    sections = _math_sections()
+    assert {str(n) for n in range(1, 9)} <= sections
+    files = [*PACKAGE.rglob("*.py"), *PACKAGE.rglob("*.glsl"), *(ROOT / "docs").glob("*.md"), ROOT / "README.md",
+             *(ROOT / "tests").rglob("*.py"), *(ROOT / "experiments").glob("*.py"), *(ROOT / "notebooks").glob("*.py")]
+    cited, outside = set(), []
+    for path in files:
+        text = path.read_text()
+        cited |= {(str(path.relative_to(ROOT)), n) for n in re.findall(r"math\.md ?§ ?(\d+(?:\.\d+)?)", text)}
+        if "../shared" in text and path != pathlib.Path(__file__):
+            outside.append(str(path.relative_to(ROOT)))
+    assert len(cited) > 50
+    assert sorted((f, n) for f, n in cited if n not in sections) == []
+    assert outside == []
+    assert "MATH.md" not in "".join(p.read_text() for p in PACKAGE.rglob("*.py"))
+    bibliography = (ROOT / "docs" / "bibliography.md").read_text()
+    seeds = {m for p in PACKAGE.rglob("*.py") for m in re.findall(r"seed (\d{3})", p.read_text())}
+    assert seeds and all(f"| {s} |" in bibliography for s in seeds), seeds

@@ -1,4 +1,4 @@
-"""Properties of the coplanarity conic (seed 001 eq. 9-15, 22-24; MATH.md §2-3)."""
+"""Properties of the coplanarity conic (seed 001 eq. 9-15, 22-24; math.md §2-3)."""
 
 from decimal import Decimal, getcontext
 
@@ -84,7 +84,7 @@ def test_conic_is_the_triple_product_everywhere():
 
 
 def test_symmetric_matrix_is_the_symmetric_part_of_K():
-    """`symmetric_matrix(A..F)` rebuilds `S = (K + K^T) / 2` of MATH.md §2 from the six coefficients."""
+    """`symmetric_matrix(A..F)` rebuilds `S = (K + K^T) / 2` of math.md §2 from the six coefficients."""
     V, N, P, L, _ = _config(19, 64)
     args = [jnp.asarray(x) for x in (V, N, P, L)]
     K = np.asarray(conic_matrix(*args))
@@ -318,7 +318,7 @@ def test_quadratic_solver_never_returns_nan_or_inf(dtype):
 
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_a_root_at_a_vertex_belongs_to_both_edges_and_the_window_is_64_eps(dtype):
-    """MATH.md §3 tolerance policy: roots within `64 eps` outside [0, 1] are kept and clamped
+    """math.md §3 tolerance policy: roots within `64 eps` outside [0, 1] are kept and clamped
     (so a curve through a vertex is reported on both edges that meet there); roots further
     out are dropped."""
     rng = np.random.default_rng(5)

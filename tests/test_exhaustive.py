@@ -1,4 +1,4 @@
-"""The certified all-solutions reference (MATH.md §5, docs/solvers.md "The certified
+"""The certified all-solutions reference (math.md §5, docs/solvers.md "The certified
 reference") on planted paths, steep waves, issue 16's jittered wave, against Newton started
 from every face, and with and without its conservative culling.
 

@@ -1,4 +1,4 @@
-"""Properties of refract / reflect / Fresnel (MATH.md §1), float32 and float64."""
+"""Properties of refract / reflect / Fresnel (math.md §1), float32 and float64."""
 
 import subprocess
 import sys

@@ -1,4 +1,4 @@
-"""Newton baselines (MATH.md §5: MNEE/SMS on optimistix) on planted paths and steep waves.
+"""Newton baselines (math.md §5: MNEE/SMS on optimistix) on planted paths and steep waves.
 
 Every run uses the same mesh size (2048 faces, as `test_walk.py`) and the same number of
 paths (256), so jit compiles once per (dtype, options).

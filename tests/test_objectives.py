@@ -1,4 +1,4 @@
-"""Objectives at planted refracted paths (seed 001 eq. 16-21; MATH.md §4)."""
+"""Objectives at planted refracted paths (seed 001 eq. 16-21; math.md §4)."""
 
 import jax
 import jax.numpy as jnp

@@ -1,4 +1,4 @@
-"""`arcs.trace_arcs`, the library's curve tracer (seed 001 §3.4.3; MATH.md §2-3): its samples
+"""`arcs.trace_arcs`, the library's curve tracer (seed 001 §3.4.3; math.md §2-3): its samples
 lie on the coplanarity curve, inside their face, and its arcs chain across edges.
 
 One trace per dtype (one compile each) of a small wavy pool; the checks are the numpy

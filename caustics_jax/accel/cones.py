@@ -3,7 +3,7 @@ normal cones per patch of faces (the hierarchy of Walter et al. 2009, "Single sc
 in refractive media with triangle mesh boundaries", §4, applied to one receiver-light pair).
 
 At a refraction point `M` Snell's law reads `n~ x H = 0` with the generalised half vector
-`H = w_L + eta w_P` (MATH.md §1 and §4; `w_P`, `w_L` unit vectors from `M` to `P` and
+`H = w_L + eta w_P` (math.md §1 and §4; `w_P`, `w_L` unit vectors from `M` to `P` and
 `L`): `n~` is parallel to `H`. For a patch of faces inside a ball of centre `c` and radius
 `r`, with `|P - c| = D_P > r`:
 

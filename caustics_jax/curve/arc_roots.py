@@ -19,7 +19,7 @@ barycentrics are `(a, b) = (a_h, b_h) / q` with `a_h, b_h, q` polynomials of deg
 `x`; on a straight conic (constant normals) the arc is the segment itself, `q = 1`.
 Homogeneously, `q M`, `q n~`, `q (P - M)` and `q (L - M)` are polynomials of degree 2.
 
-At a refraction point Snell's law in vector form holds (MATH.md §1, the half-vector
+At a refraction point Snell's law in vector form holds (math.md §1, the half-vector
 form of §4): `n~ x (w_L + eta w_P) = 0` (`w_P`, `w_L` unit vectors from `M` to `P` and
 `L`). On the coplanarity curve `n~`, `w_P` and `w_L` lie in one plane through `P`, `L`
 and `M`, so this cross product is parallel to the plane's normal `nu`, and with a fixed

@@ -1,5 +1,5 @@
 """Arcs of the coplanarity conic inside one triangle: the geometry the walk, the exhaustive
-reference and the curve tracer share (seed 001 §3.4.3-3.4.4, MATH.md §2-3).
+reference and the curve tracer share (seed 001 §3.4.3-3.4.4, math.md §2-3).
 
 Inside a face the conic `A a^2 + B b^2 + C a b + D a + E b + F = 0` (seed 001 eq. 12) is
 cut by the edges (eq. 22-24, corrected) into arcs. An arc is parametrised through the
@@ -51,7 +51,7 @@ def orientation(coef, e, tau):
     that the curve ahead (direction `tau`) has pencil angles `phi` in `(0, pi)`.
 
     The pencil frame of the module docstring (this project's parametrisation of the walk
-    of seed 001 §3.4.3), bent towards the tangent of seed 001 eq. 13-15 (MATH.md §2)."""
+    of seed 001 §3.4.3), bent towards the tangent of seed 001 eq. 13-15 (math.md §2)."""
     tau = tau / jnp.maximum(jnp.linalg.norm(tau), jnp.finfo(tau.dtype).tiny)
     A, B, C = coef[0], coef[1], coef[2]
     t = conic_tangent(coef, e)
@@ -66,7 +66,7 @@ def orientation(coef, e, tau):
 
 def edge_roots(coef):
     """`(t, valid, ab)`: the conic's edge roots (`conic.edge_intersections`, `(3, 2)` each)
-    and their barycentrics `(3, 2, 2)` (seed 001 eq. 22-24, corrected in MATH.md §3)."""
+    and their barycentrics `(3, 2, 2)` (seed 001 eq. 22-24, corrected in math.md §3)."""
     t, valid = edge_intersections(coef)
     return t, valid, edge_intersection_points(t)
 
@@ -191,7 +191,7 @@ def on_tangent_line(across, dist, scale):
     `e` (`(root - e) . perp`), lies on that tangent line to rounding (`next_crossing`):
     `|across| <= 1e3 eps dist`, or `<= 64 eps scale` with `scale` the magnitude of the
     barycentrics of both points (their absolute rounding). A rounding bound of this
-    project (MATH.md §1: tolerances scaled to eps), no paper formula."""
+    project (math.md §1: tolerances scaled to eps), no paper formula."""
     eps = float(np.finfo(across.dtype).eps)
     return (jnp.abs(across) <= 1e3 * eps * dist) | (jnp.abs(across) <= 64 * eps * scale)
 
@@ -199,7 +199,7 @@ def on_tangent_line(across, dist, scale):
 def project_to_conic(coef, q):
     """The conic point nearest `q` along the gradient direction at `q` (one exact line cut).
 
-    The gradient is `S (a, b, 1)` (MATH.md §2, seed 001 eq. 13-15 with `S` for `K^T`); the
+    The gradient is `S (a, b, 1)` (math.md §2, seed 001 eq. 13-15 with `S` for `K^T`); the
     cut is the quadratic `Q(q + h n)` in `h`."""
     t = conic_tangent(coef, q)
     n = jnp.stack([t[1], -t[0]])
@@ -229,7 +229,7 @@ def opposite(f1, f2):
 def root_between(fg1, fg2):
     """A sign change of `f` in both orientations (`objectives.bracket_objective`'s `f` and
     `g`) between two curve points: a root, not an orientation flip (seed 001 §3.4.3's
-    "if f changes sign"; eq. 20-21, MATH.md §4)."""
+    "if f changes sign"; eq. 20-21, math.md §4)."""
     return opposite(fg1[0], fg2[0]) & opposite(fg1[1], fg2[1])
 
 

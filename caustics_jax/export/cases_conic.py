@@ -1,6 +1,6 @@
 """Reference cases of the conic kernels: `conic_coefficients` (seed 001 eq. 10-12),
 `conic_tangent` (eq. 13-15 with the symmetric part S) and `edge_intersections` (eq. 22-24,
-corrected in MATH.md §3); DESIGN.md "Reference data for shader tests"."""
+corrected in math.md §3); DESIGN.md "Reference data for shader tests"."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def _gen_conic(rng, n):
                         (adv, CASES["adversarial"])])
 
 
-@register("conic_coefficients", equations="seed 001 eq. 10-12 (MATH.md §2)", reference=conic_coefficients,
+@register("conic_coefficients", equations="seed 001 eq. 10-12 (math.md §2)", reference=conic_coefficients,
           inputs={"V": "vec3[3]", "N": "vec3[3]", "P": "vec3", "L": "vec3"}, outputs={"coef": "float[6]"},
           generate=_gen_conic, audit={"coef": ("conic coefficients (max abs / max |coef|)", "rel")})
 def _eval_conic(x):
@@ -63,7 +63,7 @@ def _gen_tangent(rng, n):
                         ({"coef": coef_pl, "ab": pl.ab}, CASES["planted"]), (adv, CASES["adversarial"])])
 
 
-@register("conic_tangent", equations="seed 001 eq. 13-15 with the symmetric part S (MATH.md §2)",
+@register("conic_tangent", equations="seed 001 eq. 13-15 with the symmetric part S (math.md §2)",
           reference=conic_tangent, inputs={"coef": "float[6]", "ab": "vec2"}, outputs={"t": "vec2"},
           generate=_gen_tangent, scale={"t": "coef"})  # its cancellation is relative to the coefficients
 def _eval_tangent(x):
@@ -113,7 +113,7 @@ def _keep_edges(x, ref):
     return np.all(ok, -1)
 
 
-@register("edge_intersections", equations="seed 001 eq. 22-24, corrected (MATH.md §3); roots edge-major, "
+@register("edge_intersections", equations="seed 001 eq. 22-24, corrected (math.md §3); roots edge-major, "
           "index 2 e + k; window tol = 64 float32 eps", reference=edge_intersections,
           inputs={"coef": "float[6]"}, outputs={"t": "float[6]", "valid": "uint[6]"},
           generate=_gen_edges, keep=_keep_edges, filter_planted=True)

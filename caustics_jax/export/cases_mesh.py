@@ -52,7 +52,7 @@ def _gen_cross_edge(rng, n):
 
 
 @register("cross_edge", equations="edge crossing into the neighbour: t = 0 at vertex k, the shared edge runs "
-          "the other way there (seed 001 eq. 3 edge parametrisation, MATH.md §3)", reference=cross_edge,
+          "the other way there (seed 001 eq. 3 edge parametrisation, math.md §3)", reference=cross_edge,
           inputs={"edge": "int", "t": "float", "neighbor": "int[3]", "neighbor_edge": "int[3]"},
           outputs={"next_face": "int", "next_edge": "int", "next_t": "float", "next_ab": "vec2"},
           generate=_gen_cross_edge)

@@ -1,4 +1,4 @@
-"""Reference cases of the optics kernels: `refract` (GLSL refract, MATH.md §1, seed 002
+"""Reference cases of the optics kernels: `refract` (GLSL refract, math.md §1, seed 002
 eq. 3.1-3.2) and `fresnel` (exact dielectric Fresnel reflectance, the F of seed 001 eq. 25);
 DESIGN.md "Reference data for shader tests"."""
 
@@ -46,7 +46,7 @@ def _keep_refract(x, ref):
     return np.abs(k) > CRITICAL_MARGIN  # sqrt(k) is ill-conditioned at the critical angle
 
 
-@register("refract", equations="GLSL refract (MATH.md §1; seed 002 eq. 3.1-3.2)", reference=refract,
+@register("refract", equations="GLSL refract (math.md §1; seed 002 eq. 3.1-3.2)", reference=refract,
           inputs={"I": "vec3", "N": "vec3", "eta": "float"}, outputs={"T": "vec3"},
           generate=_gen_refract, keep=_keep_refract, audit={"T": ("refract (abs, unit vector)", "abs")})
 def _eval_refract(x):

@@ -1,6 +1,6 @@
 """Reference cases of the path and transport kernels: `signed_sine` (seed 001 eq. 19-21,
 orientation "plane"), `d_factor` (eq. 26-33, signs of docs/transport.md) and
-`photon_compression` (seed 004 eq. 10-11, Alg. 2, refraction variant of MATH.md §7);
+`photon_compression` (seed 004 eq. 10-11, Alg. 2, refraction variant of math.md §7);
 DESIGN.md "Reference data for shader tests"."""
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ def _gen_photon(rng, n):
     return stack_cases([(rand, CASES["random"]), (planted_, CASES["planted"]), (adv, CASES["adversarial"])])
 
 
-@register("photon_compression", equations="seed 004 eq. 10-11, Alg. 2 (refraction variant, MATH.md §7)",
+@register("photon_compression", equations="seed 004 eq. 10-11, Alg. 2 (refraction variant, math.md §7)",
           reference=compression_ratio,
           inputs={"x00": "vec3", "x10": "vec3", "x01": "vec3", "n00": "vec3", "n10": "vec3", "n01": "vec3",
                   "l_dir": "vec3", "eta": "float", "t_hit": "float", "s": "float", "c": "float"},

@@ -83,7 +83,7 @@ def _gen_cascade(rng, n):
 
 
 @register("cascade_dispatch", equations="seed 004 Alg. 1 with lines 24, 26, 33 fixed (Region0, >=, Region1), "
-          "thread counts eq. 4-6 (MATH.md §8)", reference=cascade_dispatch,
+          "thread counts eq. 4-6 (math.md §8)", reference=cascade_dispatch,
           inputs={"tid": "int", "ccm0_x": "int", "ccm0_y": "int", "s": "int", "n_levels": "int"},
           outputs={"texel": "int[2]", "level": "int", "valid": "uint"}, generate=_gen_cascade)
 def _eval_cascade(x):

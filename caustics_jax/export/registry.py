@@ -3,7 +3,7 @@
 A kernel is registered once, next to its case generator, by decorating the function that
 evaluates the package kernel on a dict of inputs:
 
-    @register("refract", equations="GLSL refract (MATH.md §1; seed 002 eq. 3.1-3.2)",
+    @register("refract", equations="GLSL refract (math.md §1; seed 002 eq. 3.1-3.2)",
               reference=geometry.refract, inputs={"I": "vec3", "N": "vec3", "eta": "float"},
               outputs={"T": "vec3"}, generate=_generate, keep=_keep,
               audit={"T": ("refract (abs, unit vector)", "abs")})

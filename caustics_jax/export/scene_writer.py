@@ -6,7 +6,7 @@ surface and lanes to float32 once, and on exactly those values runs
 
 - the start point and the curve walk in float32 (`solve(..., method=Walk(), features=None)`:
   the general walk, no closed form, as a shader runs it; seed 001 §3.4), then `D` (seed 001
-  eq. 26-33) and the irradiance (eq. 25, MATH.md §6) at its point: the `output` fields a
+  eq. 26-33) and the irradiance (eq. 25, math.md §6) at its point: the `output` fields a
   port must reproduce;
 - the same walk in float64 on the float32 values cast exactly to float64: the `reference`
   fields (`M_ref` + `M_ref_lo` is the float64 point in two float32 parts), and the
@@ -44,13 +44,13 @@ from .scene_records import BRACKETS, pack_scene
 from .scene_registry import SceneSpec
 from .tolerance import SAFETY
 
-#: Where the scene's math comes from (papers and MATH.md; never Python modules).
+#: Where the scene's math comes from (papers and math.md; never Python modules).
 EQUATIONS = ("start point: first crossing of segment P -> L with the surface (seed 001 §3.4.2); "
-             "walk: coplanarity conic (seed 001 eq. 10-12, MATH.md §2), tangent (eq. 13-15 with the symmetric "
-             "part, MATH.md §2), edge crossings (eq. 22-24 corrected, MATH.md §3), signed sine in the 'plane' and "
-             "'line' orientations (eq. 19-21, MATH.md §4), walk and dichotomy (§3.4.3-3.4.4) with Illinois false "
-             "position; D by ray differentials (eq. 26-33, signs of MATH.md §6); irradiance "
-             "E = eta^2 T A cos(theta_P) I_e / D (eq. 25 corrected, MATH.md §6)")
+             "walk: coplanarity conic (seed 001 eq. 10-12, math.md §2), tangent (eq. 13-15 with the symmetric "
+             "part, math.md §2), edge crossings (eq. 22-24 corrected, math.md §3), signed sine in the 'plane' and "
+             "'line' orientations (eq. 19-21, math.md §4), walk and dichotomy (§3.4.3-3.4.4) with Illinois false "
+             "position; D by ray differentials (eq. 26-33, signs of math.md §6); irradiance "
+             "E = eta^2 T A cos(theta_P) I_e / D (eq. 25 corrected, math.md §6)")
 #: Step (m) of the central difference of f along the curve that sizes `M_tol`.
 CURVE_STEP = 1e-5
 #: Runs of the float32 walk on inputs moved by one ulp that decide whether a lane is `stable`.
@@ -255,7 +255,7 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
     if has_ref.any():
         angle[has_ref] = refraction_angle_error(mesh64, face_ref[has_ref], np.asarray(ref.barycentric)[has_ref],
                                                 x64["P"][has_ref], x64["L"][has_ref], eta)
-    # Nor one where refract's float32 rounding at the solution (eta^2 eps / sqrt(k), MATH.md §1)
+    # Nor one where refract's float32 rounding at the solution (eta^2 eps / sqrt(k), math.md §1)
     # exceeds tol: there float32 cannot decide |f| <= tol (near the critical angle, P on the
     # surface). The point: the float64 reference's solution, else the testbed's point.
     ref_found = np.asarray(ref.status) == Status.FOUND

@@ -1,4 +1,4 @@
-"""Real-time pipeline kernels (MATH.md §8, §7 sprites): collection points and fixed point
+"""Real-time pipeline kernels (math.md §8, §7 sprites): collection points and fixed point
 (seed 000), denoiser, cascades, attenuation, Fresnel and sprites (seed 004), projected
 photons (seed 002).
 

@@ -1,4 +1,4 @@
-"""Adaptive-radius cross-bilateral denoiser of seed 004 (eq. 21-28, Alg. 4; MATH.md §8).
+"""Adaptive-radius cross-bilateral denoiser of seed 004 (eq. 21-28, Alg. 4; math.md §8).
 
 Two misreadings are settled here (docs/kernels.md):
 

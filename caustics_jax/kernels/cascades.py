@@ -1,4 +1,4 @@
-"""Cascaded caustic maps of seed 004 (eq. 1-7, Alg. 1; MATH.md §8).
+"""Cascaded caustic maps of seed 004 (eq. 1-7, Alg. 1; math.md §8).
 
 Level `c` of `N` renders the water surface from the light with an orthographic
 projection `s^c` times wider than level 0, at the same `W x H` resolution. The centre

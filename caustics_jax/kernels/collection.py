@@ -1,4 +1,4 @@
-"""Collection points of seed 000: radius, cylinder, reuse, resolve, temporal EMA (MATH.md §8).
+"""Collection points of seed 000: radius, cylinder, reuse, resolve, temporal EMA (math.md §8).
 
 A collection point `c` holds a position `p`, unit normal `n`, radius `r`, material id
 `m`, camera throughput `tau` and accumulated radiant intensity `I`. Photons hitting the
@@ -111,7 +111,7 @@ def cylinder_aabb(
     normal: Float[Array, "*batch 3"],
     radius: Float[Array, "*batch"],
 ) -> tuple[Float[Array, "*batch 3"], Float[Array, "*batch 3"]]:
-    """Tight AABB `(lo, hi)` of the collection cylinder (seed 000 §3; MATH.md §8).
+    """Tight AABB `(lo, hi)` of the collection cylinder (seed 000 §3; math.md §8).
 
     Cylinder of radius `r`, height `h = r / 10`, axis `n` (normalised here), centred on
     `center`. The disk of radius `r` spans `r sqrt(1 - n_i^2)` on axis `i` and the axis

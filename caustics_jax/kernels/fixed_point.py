@@ -1,4 +1,4 @@
-"""Fixed-point 4.28 accumulation with 32-bit integer atomics (seed 000 §3.2; MATH.md §8).
+"""Fixed-point 4.28 accumulation with 32-bit integer atomics (seed 000 §3.2; math.md §8).
 
 Seed 000 accumulates photon flux into each collection point with `InterlockedAdd` on a
 32-bit unsigned integer holding 4 integer and 28 fractional bits. Integer addition is

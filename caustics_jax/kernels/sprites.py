@@ -1,4 +1,4 @@
-"""Photon sprites of seed 004 (eq. 16-20; MATH.md §7): size, stretch, corners, intensity.
+"""Photon sprites of seed 004 (eq. 16-20; math.md §7): size, stretch, corners, intensity.
 
 Each photon hit is splatted as a rectangle in the tangent plane of the hit: side `q`
 across the light and `a q` along the light's projection, `a` the foreshortening of

@@ -45,7 +45,7 @@ def conic_coefficients(
 
     `V`, `N`: the triangle's vertex positions and vertex normals (rows); `P` receiver, `L`
     light. With `K = N^T Q`: `A = K11, B = K22, C = K12 + K21, D = K13 + K31,
-    E = K23 + K32, F = K33` (MATH.md §2).
+    E = K23 + K32, F = K33` (math.md §2).
     """
     K = conic_matrix(V, N, P, L)
     return jnp.stack(
@@ -71,7 +71,7 @@ def conic_value(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) ->
 
 def symmetric_matrix(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3"]:
     """Symmetric part `S = (K + K^T) / 2` of the conic, rebuilt from `A..F` (seed 001 eq. 12;
-    MATH.md §2: `S x` is half the gradient of `x^T K x`)."""
+    math.md §2: `S x` is half the gradient of `x^T K x`)."""
     A, B, C, D, E, F = jnp.moveaxis(coef, -1, 0)
     return jnp.stack(
         [
@@ -88,7 +88,7 @@ def conic_tangent(coef: Float[Array, "*batch 6"], ab: Float[Array, "*batch 2"]) 
     """Tangent `(-v, u)` of the conic at `ab` in barycentric space (seed 001 eq. 13-15).
 
     `(u, v, w) = S (a, b, 1)` with the symmetric part `S`. The paper's eq. 14 multiplies by
-    `K^T`, which is the gradient direction only for symmetric `K` (MATH.md §2;
+    `K^T`, which is the gradient direction only for symmetric `K` (math.md §2;
     `tests/test_conic.py::test_paper_tangent_with_K_transpose_is_wrong_away_from_M0`
     shows the difference). Not normalised: its length is half the gradient's, zero at a
     singular point of the conic.
@@ -114,7 +114,7 @@ def conic_centre(coef: Float[Array, "*batch 6"]):
 
 @float_inputs("V", "t")
 def tangent_to_world(V: Float[Array, "*batch 3 3"], t: Float[Array, "*batch 2"]) -> Float[Array, "*batch 3"]:
-    """`t_world = t_a (V1 - V0) + t_b (V2 - V0)` (MATH.md §2)."""
+    """`t_world = t_a (V1 - V0) + t_b (V2 - V0)` (math.md §2)."""
     return t[..., 0:1] * (V[..., 1, :] - V[..., 0, :]) + t[..., 1:2] * (V[..., 2, :] - V[..., 0, :])
 
 
@@ -124,7 +124,7 @@ def edge_quadratics(coef: Float[Array, "*batch 6"]) -> Float[Array, "*batch 3 3"
     Edge 0 (`b = 0`, `t = a`): `A t^2 + D t + F`; edge 1 (`(a, b) = (1 - t, t)`):
     `(A + B - C) t^2 + (C + E - 2A - D) t + (A + D + F)`; edge 2 (`a = 0`, `t = b`):
     `B t^2 + E t + F`. The paper's eq. 22 (`B b^2 + D b + F`) and eq. 23
-    (`A a^2 + C a + F`) are misprints (MATH.md §3); eq. 24 is right.
+    (`A a^2 + C a + F`) are misprints (math.md §3); eq. 24 is right.
     """
     A, B, C, D, E, F = jnp.moveaxis(coef, -1, 0)
     e0 = jnp.stack([A, D, F], -1)
@@ -228,7 +228,7 @@ def edge_intersections(coef: Float[Array, "*batch 6"], tol: float | None = None)
 
 def edge_intersection_points(t: Float[Array, "*batch 3 2"]) -> Float[Array, "*batch 3 2 2"]:
     """Barycentric `(a, b)` of each edge root returned by `edge_intersections` (seed 001
-    eq. 22-24 as corrected in MATH.md §3; edge table of `barycentric.py`)."""
+    eq. 22-24 as corrected in math.md §3; edge table of `barycentric.py`)."""
     edge = jnp.arange(3)[:, None]
     return edge_barycentric(jnp.broadcast_to(edge, t.shape), t)
 

@@ -1,6 +1,6 @@
 """Vector geometry shared by every layer: safe normalise, reflect, refract, exact Fresnel.
 
-Conventions (MATH.md §1): `refract` has exactly GLSL semantics so the shader port can be
+Conventions (math.md §1): `refract` has exactly GLSL semantics so the shader port can be
 compared line by line; `eta` is the ratio incident/transmitted index.
 """
 
@@ -66,7 +66,7 @@ def reflect(I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"]) -> Float[A
 
 
 def refraction_k(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
-    """Refract's `k = 1 - eta^2 (1 - cos_i^2)` (seed 002 eq. 3.1; MATH.md §1): `cos_t^2`.
+    """Refract's `k = 1 - eta^2 (1 - cos_i^2)` (seed 002 eq. 3.1; math.md §1): `cos_t^2`.
 
     `cos_i = dot(N, I)` (either sign), `eta` = n_incident / n_transmitted. Negative under
     total internal reflection. `refract` and `fresnel_reflectance` both call it.
@@ -98,7 +98,7 @@ _K_LARGE_ETA = 16.0
 def refract(
     I: Float[Array, "*batch 3"], N: Float[Array, "*batch 3"], eta
 ) -> Float[Array, "*batch 3"]:
-    """GLSL `refract` (seed 002 eq. 3.1-3.2; MATH.md §1).
+    """GLSL `refract` (seed 002 eq. 3.1-3.2; math.md §1).
 
     `I` unit incident direction, `N` unit normal facing against it (`dot(N, I) <= 0`),
     `eta` = n_incident / n_transmitted. `k = 1 - eta^2 (1 - dot(N, I)^2)`; total internal

@@ -1,4 +1,4 @@
-"""Objectives whose zeros are refracted paths `P -> M -> L` (seed 001 §3.4.1, MATH.md §4).
+"""Objectives whose zeros are refracted paths `P -> M -> L` (seed 001 §3.4.1, math.md §4).
 
 All take the triangle (`V`, `N`: vertex positions and normals, rows), the receiver `P`
 (inside the medium), the light `L` (outside), the barycentric point `ab` and
@@ -31,7 +31,7 @@ class ObjectiveStatus(enum.IntEnum):
 
 
 def path_vectors(V, N, P, L, ab):
-    """`M`, shading normal `n_s`, `w_P`, `w_L` at `ab` (MATH.md §1), and a degeneracy flag:
+    """`M`, shading normal `n_s`, `w_P`, `w_L` at `ab` (math.md §1), and a degeneracy flag:
     a zero vector among `n~`, `P - M`, `L - M`, or one whose length overflows the dtype (a
     scene beyond `arguments.scale_range`: float32 `P - M` of 3e19 m normalised to 0 and
     read as a root with status OK)."""
@@ -46,7 +46,7 @@ def path_vectors(V, N, P, L, ab):
 def refracted_direction(V, N, P, L, ab, eta):
     """`refract(-w_P, -n_s, eta)`: where the light arriving at `P` came from, seen at `M`.
 
-    Seed 001 eq. 19 with the GLSL `refract` of MATH.md §1.
+    Seed 001 eq. 19 with the GLSL `refract` of math.md §1.
     """
     _, n_s, w_P, _, _ = path_vectors(V, N, P, L, ab)
     return refract(-w_P, -n_s, eta)
@@ -178,7 +178,7 @@ def half_vector_residual(
 ) -> Float[Array, "*batch 2"]:
     """Tangential part of the generalised half vector in the frame of `n_s` (Walter et al. 2009).
 
-    `h = -(eta_out w_L + eta_in w_P)` normalised (MATH.md §4, with `eta_out = 1`,
+    `h = -(eta_out w_L + eta_in w_P)` normalised (math.md §4, with `eta_out = 1`,
     `eta_in = eta`); a refracted path has `h` parallel to `n_s`, so both components
     vanish. `h` is the zero vector only for `eta = 1` on the straight line `P -> L`.
     """

@@ -111,7 +111,7 @@ def check_bool(name: str, value) -> bool:
 
 
 def check_eta(eta, name: str = "eta") -> float:
-    """The index ratio `eta_in / eta_out` (MATH.md §1): one finite positive real number."""
+    """The index ratio `eta_in / eta_out` (math.md §1): one finite positive real number."""
     if not is_real_scalar(eta) or not math.isfinite(float(eta)) or float(eta) <= 0:
         raise ValueError(
             f"{name} must be one finite positive real number (eta_in / eta_out, water 1.333), got {eta!r}")

@@ -1,4 +1,4 @@
-// Arcs of the coplanarity conic inside one triangle (seed 001 §3.4.3-3.4.4, MATH.md §2-3;
+// Arcs of the coplanarity conic inside one triangle (seed 001 §3.4.3-3.4.4, math.md §2-3;
 // caustics_jax/curve/arcs.py): the pencil of lines through a curve point parametrises the curve by
 // the line's angle phi, measured from the travel direction tau towards perp; orientation
 // picks perp's sense so that the curve ahead has phi in (0, pi), increasing along it, and the

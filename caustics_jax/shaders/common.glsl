@@ -11,7 +11,7 @@ const float CJ_TINY = 1.1754944e-38;  // jnp.finfo(float32).tiny, the smallest n
 
 float cj_safe_sqrt(float x) { return x > 0.0 ? sqrt(x) : 0.0; }
 
-// ---------------------------------------------------------------- geometry (MATH.md §1)
+// ---------------------------------------------------------------- geometry (math.md §1)
 
 // A finite number > 0 (NaN and inf fail).
 bool cj_finite_positive(float x) { return x > 0.0 && !isinf(x); }
@@ -33,7 +33,7 @@ float cj_refraction_k(float cos_i, float eta) {
     return 1.0 - eta * (eta * ((1.0 - cos_i) * (1.0 + cos_i)));
 }
 
-// GLSL refract semantics (MATH.md §1; seed 002 eq. 3.1-3.2), with the Python kernel's
+// GLSL refract semantics (math.md §1; seed 002 eq. 3.1-3.2), with the Python kernel's
 // cancellation-free k. Total internal reflection (k < 0) returns the zero vector.
 vec3 cj_refract(vec3 I, vec3 N, float eta) {
     float cos_i = dot(N, I);
@@ -100,7 +100,7 @@ vec2 cj_edge_coordinates(vec3 E1, vec3 E2, vec3 x) {
     return vec2((g22 * r1 - g12 * r2) * inv, (g11 * r2 - g12 * r1) * inv);
 }
 
-// objectives.path_vectors: M, n_s, w_P = (P - M)/|P - M|, w_L = (L - M)/|L - M| (MATH.md §1).
+// objectives.path_vectors: M, n_s, w_P = (P - M)/|P - M|, w_L = (L - M)/|L - M| (math.md §1).
 bool cj_path_vectors(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab,
                      out vec3 M, out vec3 n_s, out vec3 w_P, out vec3 w_L) {
     M = cj_barycentric_point(V, ab);
@@ -124,9 +124,9 @@ void cj_orthonormal_frame(vec3 n, out vec3 s, out vec3 t) {
     t = vec3(b, sgn + n.y * n.y * a, -n.y);
 }
 
-// ------------------------------------------------------ the coplanarity conic (MATH.md §2-3)
+// ------------------------------------------------------ the coplanarity conic (math.md §2-3)
 
-// Conic coefficients A..F of the coplanarity constraint (seed 001 eq. 10-12; MATH.md §2):
+// Conic coefficients A..F of the coplanarity constraint (seed 001 eq. 10-12; math.md §2):
 // K = N^T Q with columns of N: n1 - n0, n2 - n0, n0 (eq. 7) and of Q: PL x V0V1,
 // PL x V0V2, PL x PV0 (eq. 10); A = K11, B = K22, C = K12 + K21, D = K13 + K31,
 // E = K23 + K32, F = K33.
@@ -152,7 +152,7 @@ float cj_conic_value(float coef[6], vec2 ab) {
 }
 
 // Conic tangent (-v, u) in barycentric space (seed 001 eq. 13-15 with the symmetric part
-// S = (K + K^T)/2, MATH.md §2: the paper's K^T is the gradient only for symmetric K).
+// S = (K + K^T)/2, math.md §2: the paper's K^T is the gradient only for symmetric K).
 vec2 cj_conic_tangent(float coef[6], vec2 ab) {
     float A = coef[0], B = coef[1], C = coef[2], D = coef[3], E = coef[4];
     float u = A * ab.x + C / 2.0 * ab.y + D / 2.0;
@@ -190,7 +190,7 @@ void cj_solve_quadratic(float q2, float q1, float q0, out vec2 roots, out bvec2 
 }
 
 // Intersections of the conic with the three triangle edges (seed 001 eq. 22-24, corrected
-// in MATH.md §3; conic.edge_intersections). Edge 0: b = 0, t = a; edge 1: (a, b) = (1 - t, t);
+// in math.md §3; conic.edge_intersections). Edge 0: b = 0, t = a; edge 1: (a, b) = (1 - t, t);
 // edge 2: a = 0, t = b. Outputs edge-major: t[2 e + k], valid[2 e + k].
 void cj_edge_intersections(float coef[6], out float t[6], out uint valid[6]) {
     float A = coef[0], B = coef[1], C = coef[2], D = coef[3], E = coef[4], F = coef[5];
@@ -271,7 +271,7 @@ void cj_bracket_objective(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float e
 
 // Distance correction factor D = |L'_perp x L'_par| by ray differentials (seed 001 eq. 26-33),
 // with the signs measured in transport/differentials.py (ray_differential_D): eq. 28 negated,
-// eq. 31 with -eta, n_s' from the barycentrics of M' (MATH.md §6). valid = 0 and D = 0 where
+// eq. 31 with -eta, n_s' from the barycentrics of M' (math.md §6). valid = 0 and D = 0 where
 // the Python kernel reports invalid (thresholds sqrt(eps) of float32).
 float cj_safe_inv(float y, bool ok) { return ok ? 1.0 / y : 0.0; }
 
@@ -314,7 +314,7 @@ void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float 
 }
 
 // Irradiance at P through the refraction point ab (seed 001 eq. 25 with the factors of
-// MATH.md §6; transport.contribution.path_irradiance): E = eta^2 T A cos(theta_P) I_e / D,
+// math.md §6; transport.contribution.path_irradiance): E = eta^2 T A cos(theta_P) I_e / D,
 // T = 1 - R the Fresnel transmittance from the light's side (cos = w_L . n_s, ratio 1/eta),
 // A = exp(-sigma_t |P - M|), cos(theta_P) = max(-w_P . n_P, 0). E = 0 where D is invalid.
 float cj_path_irradiance(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, float intensity,

@@ -1,5 +1,5 @@
 // cross_edge: the edge crossing of a walk (mesh.cross_edge; seed 001 eq. 3's edge
-// parametrisation, MATH.md §3), cj_cross_edge_row in common.glsl. Record i is face i.
+// parametrisation, math.md §3), cj_cross_edge_row in common.glsl. Record i is face i.
 void cj_run(inout Record r) {
     int k_next;
     float t_out;

@@ -1,5 +1,5 @@
 // Photon-differential footprint scale sigma = sqrt(A'/A) s^c (seed 004 eq. 10-11, Alg. 2,
-// refraction variant; MATH.md §7): the three surface points refract the light direction
+// refraction variant; math.md §7): the three surface points refract the light direction
 // with their own normals, all rays advance by the same hit distance t' (Alg. 2 lines 3-5),
 // A and A' are the surface and caustic triangle areas (Alg. 2 line 6). The caustic
 // triangle is formed from its edges hit_i - hit_00 = (x_i - x00) + t' (w_i - w00), with

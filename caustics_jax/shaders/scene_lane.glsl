@@ -1,5 +1,5 @@
 // One lane of a scene file: start point, walk, then D (seed 001 eq. 26-33) and the irradiance
-// (eq. 25 corrected, MATH.md §6) at the walk's point, as the testbed's solve and
+// (eq. 25 corrected, math.md §6) at the walk's point, as the testbed's solve and
 // path_irradiance return them: point, face and barycentrics only where a start point
 // exists (else 0, -1, 0), residual the signed sine ('plane') there, D, D_valid and E only
 // where the lane is FOUND (else 0).

@@ -1,4 +1,4 @@
-"""Exhaustive reference: every refraction point on the mesh, certified (MATH.md §5).
+"""Exhaustive reference: every refraction point on the mesh, certified (math.md §5).
 
 For each lane (P, L):
 

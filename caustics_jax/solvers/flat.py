@@ -1,10 +1,10 @@
 """Closed-form refraction points on a flat surface (`SceneFeatures.flat`).
 
 With one constant normal `n` every coplanarity conic is the line through the projections
-of `P` and `L` (seed 001 eq. 1-2, MATH.md §2): the refraction point `M` lies in the plane
+of `P` and `L` (seed 001 eq. 1-2, math.md §2): the refraction point `M` lies in the plane
 through `P` and `L` that contains `n`. With `d = c - n.P` the depth of `P` below the
 plane `n.x = c`, `h = n.L - c` the height of `L`, `P_f`, `L_f` their feet on the plane,
-`rho = |L_f - P_f|` and `M = P_f + t (L_f - P_f)`, Snell's law (MATH.md §1, `refract`
+`rho = |L_f - P_f|` and `M = P_f + t (L_f - P_f)`, Snell's law (math.md §1, `refract`
 with `eta = eta_in / eta_out`) is
 
     g(t) = eta t rho / sqrt((t rho)^2 + d^2) - (1 - t) rho / sqrt(((1 - t) rho)^2 + h^2) = 0,

@@ -1,7 +1,7 @@
 """Newton-type manifold solvers (Hanika et al. 2015 MNEE; Zeltner et al. 2020 SMS).
 
 The unknown is the barycentric point `(a, b)` of the current triangle; the residual is a
-2D constraint that vanishes on refracted paths (MATH.md §4): the half-vector constraint
+2D constraint that vanishes on refracted paths (math.md §4): the half-vector constraint
 (Walter et al. 2009, as in MNEE) or the angle-difference constraint (SMS). Same start
 point `M0` and `Solution` as the walk; a lane is `FOUND` exactly when the signed sine at
 the returned point is within `tol`, the criterion every solver is judged by. Two ways to

@@ -1,6 +1,6 @@
 """What tests and experiments share: the numpy float64 oracle, planted paths, checks.
 
-- `oracle`: MATH.md transcribed once in numpy float64, independent of the JAX kernels
+- `oracle`: math.md transcribed once in numpy float64, independent of the JAX kernels
   (`refract`, eq. 3, the shading normal, Fresnel, the refraction-angle error, ...).
 - `planted`: random triangles and refracted paths with a known solution, seeded.
 - `checks`: `assert_solution_sane`, the checks every solver test runs, and

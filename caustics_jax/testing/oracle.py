@@ -1,7 +1,7 @@
-"""The numpy float64 oracle: MATH.md transcribed once, independently of the JAX kernels.
+"""The numpy float64 oracle: math.md transcribed once, independently of the JAX kernels.
 
 Tests and experiments judge the package against these functions. They are written from
-MATH.md and the papers, in plain numpy float64, and call no JAX kernel: a wrong sign or
+math.md and the papers, in plain numpy float64, and call no JAX kernel: a wrong sign or
 a misprinted line in `geometry.py`, `objectives.py` or the solvers then shows up as a
 disagreement instead of being reproduced on both sides. For the same reason they follow
 the textbook form of each formula, not the regrouping the kernels use for accuracy
@@ -25,12 +25,12 @@ def unit(v):
 
 
 def refraction_discriminant(cos_i, eta):
-    """GLSL `refract`'s `k = 1 - eta^2 (1 - cos_i^2)` (MATH.md §1); negative under TIR."""
+    """GLSL `refract`'s `k = 1 - eta^2 (1 - cos_i^2)` (math.md §1); negative under TIR."""
     return 1 - eta**2 * (1 - cos_i**2)
 
 
 def refract(I, N, eta):
-    """GLSL `refract(I, N, eta)` (MATH.md §1; seed 002 eq. 3.1-3.2).
+    """GLSL `refract(I, N, eta)` (math.md §1; seed 002 eq. 3.1-3.2).
 
     `I` unit incident direction, `N` unit normal with `dot(N, I) <= 0`, `eta` the ratio
     incident / transmitted (broadcast against `I[..., :1]`). Returns
@@ -49,23 +49,23 @@ def barycentric_point(V, ab):
 
 
 def interpolated_normal(N, ab):
-    """Unnormalised `n~ = n0 + a (n1 - n0) + b (n2 - n0)` (seed 001 eq. 6-8; MATH.md §1)."""
+    """Unnormalised `n~ = n0 + a (n1 - n0) + b (n2 - n0)` (seed 001 eq. 6-8; math.md §1)."""
     return barycentric_point(N, ab)
 
 
 def shading_normal(N, ab):
-    """`n_s = n~ / |n~|` (MATH.md §1)."""
+    """`n_s = n~ / |n~|` (math.md §1)."""
     return unit(interpolated_normal(N, ab))
 
 
 def inside_triangle(ab, tol=0.0):
-    """`a >= -tol`, `b >= -tol`, `a + b <= 1 + tol` (seed 001 eq. 3; MATH.md §1)."""
+    """`a >= -tol`, `b >= -tol`, `a + b <= 1 + tol` (seed 001 eq. 3; math.md §1)."""
     a, b = ab[..., 0], ab[..., 1]
     return (a >= -tol) & (b >= -tol) & (a + b <= 1 + tol)
 
 
 def triple_product(V, N, P, L, ab, relative: bool = False):
-    """The coplanarity constraint `n~ . (PL x PM)` at `ab` (seed 001 eq. 9; MATH.md §2),
+    """The coplanarity constraint `n~ . (PL x PM)` at `ab` (seed 001 eq. 9; math.md §2),
     with `M` from eq. 3 and the unnormalised `n~` of eq. 6-8: zero on the conic.
 
     With `relative`, `|n~ . (PL x PM)| / (|n~| |PL| |PM|)`: the sine-like residual of a
@@ -97,7 +97,7 @@ def conic_on_line(coef, ab0, d):
 
 def fresnel_transmittance(cos_i, eta):
     """Unpolarised dielectric Fresnel transmittance `1 - (r_s^2 + r_p^2) / 2`, `eta = n_i / n_t`
-    (the `F` of seed 001 eq. 25; MATH.md §6), textbook form with `sin_t = eta sin_i`."""
+    (the `F` of seed 001 eq. 25; math.md §6), textbook form with `sin_t = eta sin_i`."""
     sin_t = eta * np.sqrt(np.maximum(1 - cos_i**2, 0))
     cos_t = np.sqrt(np.maximum(1 - sin_t**2, 0))
     r_s = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
@@ -133,7 +133,7 @@ class NumpyMesh:
 
 
 def refraction_angle_error(mesh, face, ab, P, L, eta: float) -> np.ndarray:
-    """Angle (rad) between `refract(-w_P, -n_s, eta)` and `w_L` at `(face, ab)` (MATH.md §1, §4).
+    """Angle (rad) between `refract(-w_P, -n_s, eta)` and `w_L` at `(face, ab)` (math.md §1, §4).
 
     The check every solver result is judged by. `mesh` is anything `NumpyMesh.from_mesh`
     reads. Returns `pi` where the refraction is total internal reflection.
@@ -154,7 +154,7 @@ def refraction_angle_error(mesh, face, ab, P, L, eta: float) -> np.ndarray:
 def refraction_rounding_bound(mesh, face, ab, P, eta: float, dtype) -> np.ndarray:
     """First-order rounding bound (rad) of `refract(-w_P, -n_s, eta)` in `dtype` at `(face, ab)`.
 
-    In GLSL `refract` (MATH.md §1) `k = 1 - eta^2 (1 - c^2)`, `c = w_P . n_s`; a rounding
+    In GLSL `refract` (math.md §1) `k = 1 - eta^2 (1 - c^2)`, `c = w_P . n_s`; a rounding
     `dc ~ eps` of `c` moves `k` by `2 eta^2 c dc` and `sqrt(k)` by `eta^2 c dc / sqrt(k)`,
     so the refracted direction (and the signed sine `f`) carries an error of about
     `eta^2 eps / sqrt(k)` that no solver can remove. It exceeds the float32 acceptance
@@ -171,7 +171,7 @@ def refraction_rounding_bound(mesh, face, ab, P, eta: float, dtype) -> np.ndarra
 def flat_interface_irradiance(P, L, z_surface: float, eta: float, intensity: float = 1.0,
                               sigma_t: float = 0.0, return_point: bool = False):
     """Exact irradiance on a horizontal receiver at `P` under a flat interface `z = z_surface`
-    (MATH.md §6, without the paraxial approximation).
+    (math.md §6, without the paraxial approximation).
 
     With light height `h = L_z - z_surface`, receiver depth `d = z_surface - P_z` and
     horizontal distance `rho`, the ray leaving the light at angle `theta_a` from the

@@ -1,7 +1,7 @@
 """Planted refracted paths: random triangles and paths `P -> M -> L` with a known `M`.
 
 Everything is drawn with numpy from an integer seed, in float64, then cast, so the same
-seed gives the same float64 reference and float32 copy (MATH.md §4 "verify with planted
+seed gives the same float64 reference and float32 copy (math.md §4 "verify with planted
 solutions"). The geometry (eq. 3, the shading normal, GLSL `refract`) is the oracle's.
 """
 
@@ -81,7 +81,7 @@ def random_triangles(rng: np.random.Generator, n: int, *, size: float = 1.0,
 
 
 def path_endpoints(M, n_s, w_P, d_P, d_L, eta: float):
-    """`P = M + d_P w_P` and `L = M + d_L w_L`, `w_L = refract(-w_P, -n_s, eta)` (MATH.md §4).
+    """`P = M + d_P w_P` and `L = M + d_L w_L`, `w_L = refract(-w_P, -n_s, eta)` (math.md §4).
 
     `M`, `n_s`, `w_P` `(n, 3)` float64 (`w_P` unit, into the medium); `d_P`, `d_L` `(n,)`
     or `(n, 1)` distances. Returns `(P, L)`.

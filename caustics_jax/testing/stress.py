@@ -1,6 +1,6 @@
 """Adversarial configurations for the stress suite (docs/stability.md), seeded numpy, float64.
 
-Each category is one surface plus a batch of refracted paths planted on it (MATH.md §4
+Each category is one surface plus a batch of refracted paths planted on it (math.md §4
 "verify with planted solutions"): a face, a barycentric point `ab` and the receiver `P`
 and light `L` for which `P -> M -> L` refracts at `M`. Every kernel can be evaluated at
 the planted point, and every solver must return that point or another valid solution.
@@ -99,7 +99,7 @@ def plant(V, N, ab, theta, h, d_P, d_L, eta: float = ETA):
 
     `w_P` leaves `M` into the medium at angle `theta` (rad) from `-n_s`, its tangential
     part along `h` projected onto the tangent plane of `n_s`; `w_L = refract(-w_P, -n_s,
-    eta)` (MATH.md §1), `P = M + d_P w_P`, `L = M + d_L w_L`. Returns `(P, L)`.
+    eta)` (math.md §1), `P = M + d_P w_P`, `L = M + d_L w_L`. Returns `(P, L)`.
     """
     n_s = shading_normal(N, ab)
     tangent = unit(h - np.sum(h * n_s, -1, keepdims=True) * n_s)

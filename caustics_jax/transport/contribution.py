@@ -1,4 +1,4 @@
-"""Caustic irradiance at a receiver from a solved path (seed 001 eq. 25, corrected per MATH.md §6).
+"""Caustic irradiance at a receiver from a solved path (seed 001 eq. 25, corrected per math.md §6).
 
 Seed 001 eq. 25 weights a path `P -> M -> L` by `I_e F A rho / D`. As irradiance at `P`
 (flux per unit receiver area) from a point light of intensity `I_e` (W/sr), the formula
@@ -22,7 +22,7 @@ The paper's `rho` (BRDF) turns irradiance into reflected radiance and is left to
 caller. The formula is established by experiment, not assumed: `photon_irradiance`
 (brute-force photon tracing) and the photon-differential irradiance agree with it
 (`docs/irradiance.md`, `experiments/irradiance_agreement.py`, `tests/transport/`).
-On a flat interface at normal incidence it reduces to MATH.md §6's paraxial
+On a flat interface at normal incidence it reduces to math.md §6's paraxial
 `E = I_e T / (h + d/eta)^2` (light height `h`, receiver depth `d`).
 """
 
@@ -66,7 +66,7 @@ def path_irradiance(
 ) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """Irradiance at `P` through refraction point `ab`: `eta^2 T A cos(theta_P) I_e / D`.
 
-    Seed 001 eq. 25 with the factors MATH.md §6 says it leaves out (module docstring).
+    Seed 001 eq. 25 with the factors math.md §6 says it leaves out (module docstring).
     `receiver_normal` is normalised here (any finite length, `unit_vector`). Returns
     `(E, valid)`; `E = 0` where `valid` is False (`ray_differential_D` invalid: TIR,
     grazing, degenerate; a zero or non-finite `receiver_normal`, which had given `E = 0`

@@ -4,7 +4,7 @@
 the receiver `P` spreads by the time it reaches the light `L`: `D = |L'_perp x L'_par|`,
 the area that a unit square of directions at `P` (spanned by `w_perp`, `w_par`) covers on
 the plane through `L` orthogonal to `w_L`. `ray_differential_D` evaluates the paper's
-closed form (MATH.md §6); `autodiff_D` is the exact reference, the Jacobian determinant of
+closed form (math.md §6); `autodiff_D` is the exact reference, the Jacobian determinant of
 a ray trace through the flat triangle with interpolated normals, by `jax.jacfwd`.
 
 Both take the triangle (`V`, `N`: vertex positions and unit vertex normals, rows), the
@@ -25,16 +25,16 @@ Signs, measured against `autodiff_D` (`tests/transport/test_differentials.py`,
 - So the extracted eq. 28-31 mix two readings of `w_P'`; negating the `w_P'.n_s` of
   eq. 30 alone, or eq. 28 together with eq. 31's `eta` term, makes them consistent.
   These two readings agree with the exact Jacobian (to 1e-11 relative, float64): the true
-  derivative with respect to `w_P`, used here and in MATH.md §6 (`M' = -d_P (...)`,
+  derivative with respect to `w_P`, used here and in math.md §6 (`M' = -d_P (...)`,
   eq. 30 as printed, eq. 31 with `-eta`, `n_s'` from the barycentrics of this `M'`), and
   its global negation (eq. 28 and eq. 31 as extracted, `-w_P'.n_s` in eq. 30), which
   flips `L'` and keeps `D`. Flipping `M'` alone (eq. 28 as printed with `-eta` in
   eq. 31) is wrong even on flat triangles (median relative error 0.7, up to 1e3; at
-  `eta = 1` it gives `(d_P - d_L)^2`, as MATH.md §6 says); so are eq. 28-31 exactly as
+  `eta = 1` it gives `(d_P - d_L)^2`, as math.md §6 says); so are eq. 28-31 exactly as
   extracted, `+eta` with the true `M'`, a negated `mu'` (0.15 to 0.75).
 - The paper leaves `n_s'` implicit: `n_s' = (I - n_s n_s^T) n~' / |n~|` with
   `n~' = (n1 - n0) a' + (n2 - n0) b'`, `(a', b')` the barycentric coordinates of `M'`
-  (MATH.md §6). Dropping it is exact only on flat (constant-normal) triangles (median
+  (math.md §6). Dropping it is exact only on flat (constant-normal) triangles (median
   relative error 0.15 with `normal_spread = 0.3`).
 """
 
@@ -94,7 +94,7 @@ def ray_differential_D(
     - eq. 28 (sign corrected, module docstring):
       `M' = -d_P (w_P' - (w_P'.n_g)/(w_P.n_g) w_P)`, `n_g` the geometric normal;
     - `n_s' = (I - n_s n_s^T) ((n1 - n0) a' + (n2 - n0) b') / |n~|`, `(a', b')` the
-      barycentric coordinates of `M'` (implicit in the paper; MATH.md §6);
+      barycentric coordinates of `M'` (implicit in the paper; math.md §6);
     - eq. 29: `mu = w_L.n_s + eta w_P.n_s`;
     - eq. 30: `mu' = (eta^2 (w_P.n_s)/(w_L.n_s) + eta) (w_P'.n_s + w_P.n_s')`;
     - eq. 31 (minus sign restored): `w_L' = -eta w_P' + mu' n_s + mu n_s'`;
@@ -197,7 +197,7 @@ def autodiff_D(
     `normalize(-w_P + s_perp w_perp + s_par w_par)`, refracted at the triangle's plane by
     the interpolated normal, meets the plane through `L` orthogonal to `w_L`, in an
     orthonormal basis of that plane; `w_perp, w_par` are those of `ray_differential_D`.
-    At a solution `ab` this equals `ray_differential_D` (MATH.md §6 **verify**). Finite
+    At a solution `ab` this equals `ray_differential_D` (math.md §6 **verify**). Finite
     for finite input; meaningless where `ray_differential_D` reports `valid = False`.
     """
     eta = jnp.asarray(eta, jnp.asarray(P).dtype)

@@ -3,7 +3,7 @@ the comparison seed 001 makes in §5 (Fig. 7-8) against Zeltner et al. 2020.
 
 The caustic irradiance at a receiver is a sum over every refracted path,
 `E(P) = sum_k E_k` with `E_k` = `path_irradiance` at refraction point `M_k` (seed 001
-eq. 25 with MATH.md §6's factors). A Newton solve (`caustics_jax.Newton`, the MNEE/SMS
+eq. 25 with math.md §6's factors). A Newton solve (`caustics_jax.Newton`, the MNEE/SMS
 baseline) started at a random point of the surface converges to one solution `M_k` with
 an unknown probability `p_k` (its basin's share of the surface area), or fails. SMS
 (Zeltner et al. 2020, "Specular manifold sampling for rendering high-frequency caustics

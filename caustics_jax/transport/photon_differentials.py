@@ -114,7 +114,7 @@ def _scatter_pair(l0, n0, l1, n1, eta, mode):
         dr = dl - 2 * (c1[..., None] * dn + dc[..., None] * n0)
         ok = arrives
     else:
-        # GLSL refract (MATH.md §1) with e = 1/eta: r = e I - (e c + s) N, s = sqrt(k),
+        # GLSL refract (math.md §1) with e = 1/eta: r = e I - (e c + s) N, s = sqrt(k),
         # k = refraction_k(c, e); so r1 - r0 = e dl - (e c1 + s1) dn - (e dc + ds) n0 with
         # ds = (k1 - k0) / (s1 + s0) and k1 - k0 = e^2 dc (c0 + c1).
         eta = jnp.asarray(eta, l0.dtype)
@@ -244,7 +244,7 @@ def compression_ratio_exact(
 ) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """`A'_rec / A`: the three rays of Alg. 2 each intersected with the receiver plane.
 
-    The reference for `compression_ratio`'s same-`t'` shortcut (MATH.md §7): no shared
+    The reference for `compression_ratio`'s same-`t'` shortcut (math.md §7): no shared
     `t'`, the caustic triangle lies on the receiver. Arguments as `compression_ratio`,
     plus the receiver plane `(receiver_point, receiver_normal)` (normalised here, any
     finite length). Returns `(ratio, valid)`; `valid` False where a ray misses the plane
@@ -315,7 +315,7 @@ def texel_jacobian(
     """Exact photon differential: `J = d(receiver coords)/d(emission-plane xy)` by `jax.jacfwd`.
 
     The Jacobian of seed 003's footprint and the exact reference for seed 004 eq. 10-11
-    (MATH.md §7).
+    (math.md §7).
 
     `V, N` the surface triangle the photon through emission point `X` hits (from the
     light `L`); the receiver plane `(receiver_point, receiver_normal)`, coordinates in
@@ -343,7 +343,7 @@ def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, r
                                    sigma_t=0.0):
     """Irradiance where the photon through `X` lands: `I_e T A |cos_e| / (r_e^2 |det J|)`.
 
-    MATH.md §7's flux bookkeeping, `Phi / A'`, with the exact landing area.
+    math.md §7's flux bookkeeping, `Phi / A'`, with the exact landing area.
 
     Flux `I_e |cos_e| du dv / r_e^2` through the emission texel `du dv` (photons.py), times
     `T` and `A = exp(-sigma_t t)`, over its landing area `|det J| du dv` (`texel_jacobian`).

@@ -88,7 +88,7 @@ def test_sprite_area_times_intensity_is_the_ray_intensity(dtype, seed):
 
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_splatting_on_a_fine_grid_integrates_to_the_ray_intensity(dtype):
-    """MATH.md §7 verify: rasterise sprites in the tangent plane, on a grid not aligned
+    """math.md §7 verify: rasterise sprites in the tangent plane, on a grid not aligned
     with the sprite, counting cells whose centre is inside the quad: sum I h^2 -> R."""
     _, l_dir, nrm, theta = _hits(3, 64)
     keep = np.flatnonzero(theta < np.radians(60))[:6]  # a <= 2: keeps the grid small

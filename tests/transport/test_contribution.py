@@ -1,4 +1,4 @@
-"""Caustic irradiance from a solved path (seed 001 eq. 25 with MATH.md §6's factors), three ways:
+"""Caustic irradiance from a solved path (seed 001 eq. 25 with math.md §6's factors), three ways:
 an independent flat-interface formula, brute-force photons, and the forward photon differential."""
 
 import jax.numpy as jnp
@@ -64,7 +64,7 @@ def test_irradiance_matches_flat_interface_formula(dtype, method, features, seed
 
 
 def test_paraxial_limit_on_axis():
-    """Straight below the light: `E = I_e T / (h + d/eta)^2` (MATH.md §6's paraxial analysis)."""
+    """Straight below the light: `E = I_e T / (h + d/eta)^2` (math.md §6's paraxial analysis)."""
     scene = scenes.flat_pool(512, dtype=jnp.float64)
     h, d, eta = 2.5, 1.0, 1.333
     E = irradiance(scene.surface, jnp.asarray([[0.1, 0.2, -d]]), jnp.asarray([0.1, 0.2, h]), intensity=1.0,

@@ -1,4 +1,4 @@
-"""The D factor by ray differentials against an exact autodiff trace (seed 001 eq. 26-33; MATH.md §6)."""
+"""The D factor by ray differentials against an exact autodiff trace (seed 001 eq. 26-33; math.md §6)."""
 
 import jax
 import jax.numpy as jnp
@@ -70,7 +70,7 @@ def _rel(x, ref):
 @given(seed=st.integers(0, 2**32 - 1), spread=st.sampled_from([0.0, 0.3, 0.6]),
        eta=st.sampled_from([1.333, 1.5]))
 def test_ray_differential_D_equals_autodiff_jacobian_determinant(seed, spread, eta):
-    """MATH.md §6 **verify**: eq. 26-33 (signs as in the module docstring) = |det| of the exact map."""
+    """math.md §6 **verify**: eq. 26-33 (signs as in the module docstring) = |det| of the exact map."""
     p = planted_paths(seed, BATCH, eta=eta, normal_spread=spread)
     args = _cast(_fields(p), jnp.float64)
     D, valid = ray_differential_D(*args, eta)
@@ -81,7 +81,7 @@ def test_ray_differential_D_equals_autodiff_jacobian_determinant(seed, spread, e
     assert valid.mean() > 0.99
     # Measured max 5.0e-11 over 920k paths (spread 0.6; 1.4e-11 at 0.3, 1.4e-12 flat):
     # the largest values are near caustics, where D is a small difference of large terms.
-    # MATH.md asks for 1e-6; the bound keeps 200x over the measurement.
+    # math.md asks for 1e-6; the bound keeps 200x over the measurement.
     assert np.max(_rel(D, D_exact)[valid]) < 1e-8
     D_ref = _D_reference(*_fields(p), eta)[0]
     assert np.max(_rel(D, D_ref)[valid]) < 1e-8  # independent numpy formula, other frame
@@ -90,7 +90,7 @@ def test_ray_differential_D_equals_autodiff_jacobian_determinant(seed, spread, e
 def test_only_the_consistent_sign_readings_match_autodiff():
     """Which signs of eq. 28-31 are right, measured against the exact trace (float64).
 
-    Right: the true derivative (minus eq. 28 as printed, `-eta` in eq. 31; MATH.md §6 and
+    Right: the true derivative (minus eq. 28 as printed, `-eta` in eq. 31; math.md §6 and
     the package), and its global
     negation (eq. 28 and eq. 31 as printed, `w_P'.n_s` negated in eq. 30), which flips L'
     and keeps D. Wrong, with the median / max relative error they give on these paths
@@ -162,9 +162,9 @@ def _geometric_normals(V):
 @pytest.mark.parametrize("dtype", DTYPES)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_D_is_squared_path_length_when_eta_is_one(dtype, seed):
-    """eta = 1 is a straight line: D = (d_P + d_L)^2 (MATH.md §6 **verify**).
+    """eta = 1 is a straight line: D = (d_P + d_L)^2 (math.md §6 **verify**).
 
-    On a flat triangle (normals = geometric normal) as MATH.md asks, and also on a curved
+    On a flat triangle (normals = geometric normal) as math.md asks, and also on a curved
     one: at eta = 1 GLSL refract is the identity whatever the normal, mu = mu' = 0 and
     n_s' drops out of eq. 31.
     """
@@ -188,7 +188,7 @@ def test_D_is_squared_path_length_when_eta_is_one(dtype, seed):
 
 
 def test_flipping_M_prime_alone_gives_d_P_minus_d_L_squared_at_eta_one():
-    """MATH.md §6: `M'` flipped without `w_P'` (eq. 28 as printed, `-eta` in eq. 31) gives
+    """math.md §6: `M'` flipped without `w_P'` (eq. 28 as printed, `-eta` in eq. 31) gives
     `(d_P - d_L)^2` at `eta = 1` on a flat surface, not `(d_P + d_L)^2`.
 
     At `eta = 1`, `mu = mu' = 0` and `w_L' = -w_P'`, so `L' = (+-d_P - d_L) w_P'`: the
@@ -210,7 +210,7 @@ def test_flipping_M_prime_alone_gives_d_P_minus_d_L_squared_at_eta_one():
 @pytest.mark.parametrize("dtype", DTYPES)
 @given(seed=st.integers(0, 2**32 - 1), eta=st.sampled_from([1.333, 1.5]))
 def test_D_at_normal_incidence_on_a_flat_surface_is_d_P_plus_eta_d_L_squared(dtype, seed, eta):
-    """MATH.md §6's flat-interface result `D = (d + eta h)^2`, exact along the normal."""
+    """math.md §6's flat-interface result `D = (d + eta h)^2`, exact along the normal."""
     rng = np.random.default_rng(seed)
     V, _ = random_triangles(rng, BATCH)  # tilted, no slivers
     N = _geometric_normals(V)
