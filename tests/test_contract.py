@@ -580,9 +580,11 @@ def test_light_endpoint_checks_its_light_index_and_points():
 
 def test_photon_irradiance_takes_a_prepared_surface_as_solve_does(pool):
     mesh, _, _ = pool
-    args = dict(intensity=1.0, receiver=cj.ReceiverGrid(-1.0, -2, 2, -2, 2, 4, 4), n_photons=0)
-    got = cj.photon_irradiance(cj.prepare(mesh), np.array([0.4, -0.3, 3.0]), **args)
-    assert got.n_photons == 0
+    args = dict(intensity=1.0, receiver=cj.ReceiverGrid(-1.0, -2, 2, -2, 2, 4, 4), n_photons=256, seed=3)
+    L = np.array([0.4, -0.3, 3.0])
+    got = cj.photon_irradiance(cj.prepare(mesh), L, **args)
+    want = cj.photon_irradiance(mesh, L, **args)
+    assert got.n_photons == 256 and np.array_equal(got.irradiance, want.irradiance)
 
 
 @pytest.mark.parametrize("kwargs, match", [
@@ -700,11 +702,13 @@ def test_zero_lanes_irradiance_start_points_and_photons(pool, feats):
     for method in ("auto", "general"):
         sp = cj.start_points(mesh, np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), method=method)
         assert np.shape(sp.face) == (0,) and np.shape(sp.barycentric) == (0, 2)
+    # No photons, or an empty receiver grid, estimates nothing: refused, not a map of zeros.
     grid = cj.ReceiverGrid(-1.0, -2, 2, -2, 2, 8, 8)
-    pm = cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid, n_photons=0)
-    assert pm.n_photons == 0 and pm.irradiance.shape == (8, 8) and not pm.irradiance.any()
-    pm = cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid._replace(nx=0), n_photons=16)
-    assert pm.irradiance.shape == (8, 0)
+    with pytest.raises(ValueError, match=r"n_photons must be an integer in \[1,"):
+        cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=grid, n_photons=0)
+    for empty in (grid._replace(nx=0), grid._replace(ny=0)):
+        with pytest.raises(ValueError, match=r"receiver\.n[xy] must be an integer in \[1,"):
+            cj.photon_irradiance(mesh, L[0], intensity=1.0, receiver=empty, n_photons=16)
 
 
 @pytest.mark.parametrize("call, match", [

@@ -29,7 +29,7 @@ from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
 from .flat import flat_root, flat_solution
 from .newton import Newton, solve_newton
 from .options import SolverOptions
-from .sides import warn_if_wrong_sides
+from .sides import warn_if_no_crossing, warn_if_wrong_sides
 from .solution_set import translated
 from .trace import Trace, solve_trace, with_solutions
 from .walk import Walk, solve_walk
@@ -211,7 +211,9 @@ def solve_local(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333
     prep = glob.local
 
     def done(result, has_start):
-        return LocalSolve(result, prep, P, L, glob.origin, np.asarray(has_start, bool))
+        has_start = np.asarray(has_start, bool)
+        warn_if_no_crossing(prep, P, L, has_start)  # the light below the surface, receivers above it
+        return LocalSolve(result, prep, P, L, glob.origin, has_start)
 
     n, dtype = P.shape[0], prep.dtype
     eta = check_fits("eta", check_eta(eta), dtype, positive=True)

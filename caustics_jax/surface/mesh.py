@@ -1,6 +1,6 @@
 """SurfaceMesh: the refractive surface the solvers walk on, its adjacency and edge crossing.
 
-A triangle mesh with per-vertex unit normals oriented outward (toward the light, MATH.md
+A triangle mesh with per-vertex unit normals oriented outward (toward the light, math.md
 §1), geometric face normals, and an adjacency buffer: `neighbors[f, k]` is the face across
 edge `k` of face `f` (edge `k` joins vertices `k` and `k + 1 mod 3`, as in
 `barycentric.py`), `-1` on a boundary, and `neighbor_edge[f, k]` is which edge of that
@@ -400,7 +400,10 @@ def _validate_geometry(vertices, faces):
         raise ValueError(f"vertices contain NaN or Inf coordinates: vertices {_name(bad_v)}")
     bad_f = np.flatnonzero(np.any((F < 0) | (F >= len(V)), axis=-1))
     if bad_f.size:
-        raise ValueError(f"face vertex indices out of range [0, {len(V)}): faces {_name(bad_f)}")
+        one_based = F.min() == 1 and F.max() == len(V)  # OBJ numbers vertices from 1
+        hint = (f"; the indices run from 1 to {len(V)}, as in an OBJ file: pass faces - 1 (indices from 0)"
+                if one_based else "")
+        raise ValueError(f"face vertex indices out of range [0, {len(V)}): faces {_name(bad_f)}{hint}")
     F = F.astype(np.int64)
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if repeated.any():
@@ -519,7 +522,7 @@ def _check_fits(V: np.ndarray, dtype, what: str = "vertices") -> None:
 def _warn_if_inward(V: np.ndarray, F: np.ndarray, neighbors: np.ndarray) -> None:
     """Warn when the winding makes the outward normals point away from where lights are.
 
-    "Outward" is toward the light (MATH.md §1); a mesh alone does not say where the light
+    "Outward" is toward the light (math.md §1); a mesh alone does not say where the light
     is, so only two unambiguous cases warn:
 
     - a closed mesh (no boundary edge) whose signed volume `sum V0 . (V1 x V2) / 6`
@@ -549,6 +552,6 @@ def _warn_if_inward(V: np.ndarray, F: np.ndarray, neighbors: np.ndarray) -> None
     if down < -0.5 * total:
         warn_user(
             f"surface normals point mostly down (-z: {100 * -down / total:.0f}% of the area faces down): "
-            "normals must face the light (MATH.md §1), so with a light above, every lane would end TIR or "
+            "normals must face the light (math.md §1), so with a light above, every lane would end TIR or "
             "LEFT_MESH. Reverse the face winding, e.g. SurfaceMesh.from_arrays(vertices, faces[:, ::-1]); "
             "if the light really is below the surface, ignore this warning")

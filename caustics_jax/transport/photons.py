@@ -98,17 +98,17 @@ class ReceiverGrid(NamedTuple):
         return pts.reshape(self.ny, self.nx, k * k, 3)
 
     @classmethod
-    def check(cls, receiver, name: str = "receiver", *, allow_empty: bool = False) -> ReceiverGrid:
+    def check(cls, receiver, name: str = "receiver") -> ReceiverGrid:
         """`receiver` (a `ReceiverGrid` or its 7 fields) validated: finite bounds with
-        `x1 > x0`, `y1 > y0`, integer `nx, ny` in `[1, 2^15]` (`[0, 2^15]` with
-        `allow_empty`: an empty grid); `ValueError` naming `name` otherwise."""
+        `x1 > x0`, `y1 > y0`, integer `nx, ny` in `[1, 2^15]` (an empty grid bins nothing
+        and is refused); `ValueError` naming `name` otherwise."""
         try:
             grid = cls(*receiver)
         except TypeError:
             raise ValueError(f"{name} must be a ReceiverGrid(z, x0, x1, y0, y1, nx, ny), got {receiver!r}") from None
         for field in ("z", "x0", "x1", "y0", "y1"):
             check_real(f"{name}.{field}", getattr(grid, field))
-        nx, ny = (check_int(f"{name}.{f}", getattr(grid, f), 0 if allow_empty else 1, 2**15) for f in ("nx", "ny"))
+        nx, ny = (check_int(f"{name}.{f}", getattr(grid, f), 1, 2**15) for f in ("nx", "ny"))
         grid = grid._replace(**{f: float(getattr(grid, f)) for f in ("z", "x0", "x1", "y0", "y1")}, nx=nx, ny=ny)
         if not (grid.x1 > grid.x0 and grid.y1 > grid.y0):
             raise ValueError(f"{name} needs x1 > x0 and y1 > y0, got {grid}")
@@ -256,9 +256,9 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
         raise ValueError(f"mesh must be a caustics_jax.SurfaceMesh or PreparedSurface, got {type(mesh).__name__}")
     prep = prepare(mesh)
     mesh = prep.mesh
-    receiver = ReceiverGrid.check(receiver, allow_empty=True)
+    receiver = ReceiverGrid.check(receiver)
     check_fits("receiver (z, x0, x1, y0, y1)", receiver[:5], mesh.dtype)  # traced in the mesh's dtype
-    n_photons = check_int("n_photons", n_photons, 0, MAX_PHOTONS)
+    n_photons = check_int("n_photons", n_photons, 1, MAX_PHOTONS)  # 0 photons estimate nothing
     chunk = check_int("chunk", chunk, 1, 2**24)
     seed = check_int("seed", seed, 0, 2**32 - 1)
     intensity = check_fits("intensity", check_real("intensity", intensity, 0), mesh.dtype)
@@ -273,10 +273,6 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     if receiver.z >= float(np.min(np.asarray(mesh.vertices)[:, 2])):
         raise ValueError(f"the receiver plane (receiver.z = {receiver.z}) must lie below the surface")
     shape = (receiver.ny, receiver.nx)
-    if n_photons == 0 or receiver.nx * receiver.ny == 0:  # nothing emitted, or nowhere to bin
-        zeros = np.zeros(shape)
-        return PhotonMap(irradiance=zeros, stderr=zeros.copy(), hits=np.zeros(shape, np.int64),
-                         n_photons=n_photons, receiver=receiver)
     # Traced in the frame of `prep.local` (a far mesh moved near the origin,
     # `frames.local_origin`), binned in the receiver's.
     origin = prep.origin
