@@ -37,6 +37,26 @@ def _evaluate(kernel: Kernel, inputs: dict[str, np.ndarray], dtype: str) -> dict
         return {k: np.asarray(v) for k, v in jax.jit(kernel.evaluate)(args).items()}
 
 
+#: Further batches `export_kernel` draws when a batch holds too few well-conditioned cases.
+MAX_REDRAWS = 8
+
+
+def _draw(kernel: Kernel, rng: np.random.Generator, count: int):
+    """One batch of `count` cases: `(stored float32 inputs, float64 reference, case tags,
+    keep)`, `keep` False for random and planted cases the kernel calls ill-conditioned."""
+    inputs, case = kernel.generate(rng, count)
+    # inputs as stored (float32), and the reference computed in float64 from exactly those
+    stored = {f.name: np.asarray(inputs[f.name], np.float32) for f in kernel.inputs()}
+    ref = _evaluate(kernel, {k: v.astype(np.float64) for k, v in stored.items()}, "float64")
+    if kernel.keep is None:
+        return stored, ref, case, np.ones(len(case), bool)
+    x64 = {k: v.astype(np.float64) for k, v in stored.items()}
+    with np.errstate(invalid="ignore", divide="ignore"):  # adversarial rows may be degenerate
+        filtered = (case == CASES["random"]) | ((case == CASES["planted"]) & kernel.filter_planted)
+        keep = kernel.keep(x64, ref) | ~filtered
+    return stored, ref, case, keep
+
+
 def export_kernel(kernel: Kernel, count: int, seed: int, audit: dict | None = None):
     """`(manifest, binary bytes)` for one kernel: `count` random and planted records plus the adversarial set.
 
@@ -50,24 +70,29 @@ def export_kernel(kernel: Kernel, count: int, seed: int, audit: dict | None = No
     seed = check_int("seed", seed, 0, 2**63 - 1)
     audit = load_audit() if audit is None else audit
     rng = np.random.default_rng([seed, zlib.crc32(kernel.name.encode())])
-    inputs, case = kernel.generate(rng, count)
-    # inputs as stored (float32), and the reference computed in float64 from exactly those
-    stored = {f.name: np.asarray(inputs[f.name], np.float32) for f in kernel.inputs()}
-    ref = _evaluate(kernel, {k: v.astype(np.float64) for k, v in stored.items()}, "float64")
-    if kernel.keep is not None:
-        x64 = {k: v.astype(np.float64) for k, v in stored.items()}
-        with np.errstate(invalid="ignore", divide="ignore"):  # adversarial rows may be degenerate
-            filtered = (case == CASES["random"]) | ((case == CASES["planted"]) & kernel.filter_planted)
-            keep = kernel.keep(x64, ref) | ~filtered
-    else:
-        keep = np.ones(len(case), bool)
     n_pl, n_rand = split(count)
+    stored, ref, case, keep = _draw(kernel, rng, count)
+    # Too few well-conditioned random or planted cases: draw further batches from the same
+    # stream and keep their well-conditioned cases (the first batch, and so the bytes of
+    # every seed that needs no redraw, is unchanged).
+    for _ in range(MAX_REDRAWS):
+        short = (np.sum(keep & (case == CASES["random"])) < n_rand
+                 or np.sum(keep & (case == CASES["planted"])) < n_pl)
+        if not short:
+            break
+        more = _draw(kernel, rng, count)
+        extra = more[3] & (more[2] != CASES["adversarial"])
+        stored = {k: np.concatenate([v, more[0][k][extra]]) for k, v in stored.items()}
+        ref = {k: np.concatenate([v, more[1][k][extra]]) for k, v in ref.items()}
+        case, keep = np.concatenate([case, more[2][extra]]), np.concatenate([keep, more[3][extra]])
     rand_idx = np.nonzero(keep & (case == CASES["random"]))[0][:n_rand]
     if len(rand_idx) < n_rand:
-        raise RuntimeError(f"{kernel.name}: only {len(rand_idx)} of {n_rand} random cases are well conditioned")
+        raise RuntimeError(f"{kernel.name}: only {len(rand_idx)} of {n_rand} random cases are well conditioned "
+                           f"after {MAX_REDRAWS} redraws")
     planted_idx = np.nonzero(keep & (case == CASES["planted"]))[0][:n_pl]
     if len(planted_idx) < n_pl:
-        raise RuntimeError(f"{kernel.name}: only {len(planted_idx)} of {n_pl} planted cases are well conditioned")
+        raise RuntimeError(f"{kernel.name}: only {len(planted_idx)} of {n_pl} planted cases are well conditioned "
+                           f"after {MAX_REDRAWS} redraws")
     idx = np.concatenate([rand_idx, planted_idx, np.nonzero(case == CASES["adversarial"])[0]])
     stored = {k: v[idx] for k, v in stored.items()}
     ref = {k: v[idx] for k, v in ref.items()}
