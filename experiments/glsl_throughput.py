@@ -98,7 +98,7 @@ def main(argv=None):
         data = Path(args.data) if args.data else work / "scenes"
         if not args.data:
             data.mkdir()
-            write_scenes(data, args.scenes, args.lanes, seed=0)
+            write_scenes(data, [SCENES[n] for n in args.scenes], args.lanes, seed=0)
         host = conf.build_host(work)
         spv = conf.compile_shader(sc.scene_shader_source(), work / "scene.spv")
         for name in args.scenes:

@@ -22,13 +22,14 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-NOTEBOOKS = ("solver_comparison", "kernel_accuracy", "irradiance", "shader_reference_data")
+NOTEBOOKS = ("solver_comparison", "kernel_accuracy", "irradiance", "shader_reference_data", "your_own_mesh")
 
 
 def execute(name: str, out_dir: Path, timeout: int) -> tuple[bool, float, Path]:
     """Run `notebooks/<name>.py` top to bottom; write the executed `.ipynb` into `out_dir`."""
     import jupytext
     import nbclient
+    from traitlets.config import Config
 
     nb = jupytext.read(HERE / f"{name}.py")
     n_code = sum(c.cell_type == "code" for c in nb.cells)
@@ -41,8 +42,12 @@ def execute(name: str, out_dir: Path, timeout: int) -> tuple[bool, float, Path]:
             print(f"  {name} [{cell.execution_count}/{n_code}] {now - last[0]:.0f} s", flush=True)
             last[0] = now
 
+    # The kernel talks to this process over local IPC sockets: over TCP (the default) every
+    # kernel start warns that the traffic is unencrypted, which is noise on one machine.
+    config = Config()
+    config.KernelManager.transport = "ipc"
     client = nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3", on_cell_executed=done,
-                                     resources={"metadata": {"path": str(HERE)}})
+                                     resources={"metadata": {"path": str(HERE)}}, config=config)
     ok = True
     try:
         client.execute()

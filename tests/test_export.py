@@ -328,7 +328,8 @@ def test_a_name_given_twice_is_exported_once_and_one_string_is_one_name(tmp_path
     assert [p.name for p in written] == ["fresnel.json", "fresnel.bin", "caustics_records.h"]
     assert ex.c_header([ex.KERNELS["fresnel"]] * 2).count("typedef struct cj_fresnel_record") == 1
     seen = []
-    monkeypatch.setattr(ex.scene_writer, "write_scenes", lambda out, names, lanes, seed: seen.append(names) or [])
+    monkeypatch.setattr(ex.scene_writer, "write_scenes",
+                        lambda out, specs, lanes, seed: seen.append([s.name for s in specs]) or [])
     ex.export(tmp_path / "s", kernels=[], scenes="flat_pool")
     ex.export(tmp_path / "s", kernels=[], scenes=("lagoon", "flat_pool", "lagoon"))
     assert seen == [["flat_pool"], ["lagoon", "flat_pool"]]

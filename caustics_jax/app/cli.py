@@ -4,6 +4,7 @@
     caustics-jax compare --n 20000 --dtype float32 --configs walk newton-hv --json out.json
     caustics-jax compare --scene surface.obj --n 4096          # any mesh trimesh reads (OBJ, PLY, GLB, ...)
     caustics-jax export --out refdata --count 1024 --seed 0    # shader reference data
+    caustics-jax export --out mine --scene surface.obj --light 0 0 5   # your own mesh, alone
     caustics-jax conformance refdata       # run the GLSL ports on a Vulkan device against it
     caustics-jax --version
 
@@ -22,6 +23,7 @@ from pathlib import Path
 
 from .._version import __version__
 from . import compare as cmp
+from .scene_file import scene_options
 
 
 def _fmt(x, spec=".2e"):
@@ -50,7 +52,7 @@ def format_table(report: dict) -> str:
     lines.append("")
     if ref:
         lines.append(f"success and position error (m) against the exhaustive float64 reference on "
-                     f"{ref['lanes']} lanes (solutions per lane: {ref['solutions_per_lane']}); "
+                     f"{ref['lanes']} lanes ({cmp.solution_counts(ref['solutions_per_lane'])}); "
                      "@M0: returned the solution nearest M0")
     lines.append("angle error (rad): refraction-angle error of every found lane, float64 check; "
                  "compile: first call minus a steady call (c: its programs loaded from the persistent "
@@ -177,10 +179,13 @@ def _compare(args) -> int:
         from ..runtime.blocks import use_cpu_devices
 
         use_cpu_devices(_cpu_devices_arg(args.cpu_devices))
+    opts = scene_options(args, {"scene": "wavy", "light": None, "floor_depth": None, "eta": 1.333,
+                                "triangles": 8192})
     cfg = cmp.CompareConfig(
-        scene=args.scene, n_triangles=args.triangles, n=args.n, dtypes=tuple(args.dtype),
+        scene=opts["scene"], n_triangles=opts["triangles"], n=args.n, dtypes=tuple(args.dtype),
         configs=tuple(args.configs), ref_n=args.ref_n, sweep_n=args.sweep_n,
-        sweep=not args.no_sweep, repeats=args.repeats, eta=args.eta, seed=args.seed)
+        sweep=not args.no_sweep, repeats=args.repeats, eta=opts["eta"], seed=args.seed, light=opts["light"],
+        floor_depth=opts["floor_depth"])
     # Everything a user can get wrong is refused here, before the run (minutes), not after it.
     cfg.validate()
     check_output_file("--json", args.json)
@@ -216,12 +221,26 @@ def _cpu_devices_arg(value: str) -> int | str:
         raise ValueError(f"--cpu-devices must be a positive integer or 'all', got {value!r}") from None
 
 
+def _add_scene_args(p: argparse.ArgumentParser) -> None:
+    """The scene options compare and export share (app/scene_file.py)."""
+    p.add_argument("--light", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="a point light (m) replacing the scene's (default: the scene's own; a mesh file's "
+                        "stands 0.75 W above it, W its width)")
+    p.add_argument("--floor-depth", type=float, default=None, metavar="D",
+                   help="the receivers' floor, D m below the surface (default: the scene's; W / 4 for a mesh file)")
+    p.add_argument("--eta", type=float, default=None, help="eta_in / eta_out (default: 1.333, water)")
+    p.add_argument("--scene-file", default=None, metavar="FILE.toml",
+                   help="a TOML scene description (scene, light, floor_depth, eta, triangles, lanes); flags "
+                        "given here win over it (docs/export.md, 'Your own mesh')")
+
+
 def _add_compare_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scene", default="wavy", metavar="NAME|PATH",
+    p.add_argument("--scene", default=None, metavar="NAME|PATH",
                    help=f"a named scene ({', '.join(sorted(cmp.SCENES))}) or a mesh file trimesh reads "
                         f"({', '.join(cmp.MESH_SUFFIXES)}): floor and light placed around it as documented "
-                        "in caustics_jax.app.compare.scene_from_mesh")
-    p.add_argument("--triangles", type=int, default=8192, help="surface tessellation (default: %(default)s)")
+                        "in caustics_jax.surface.scenes.scene_around (default: wavy)")
+    _add_scene_args(p)
+    p.add_argument("--triangles", type=int, default=None, help="surface tessellation (default: 8192)")
     p.add_argument("--n", type=int, default=100_000, help="receiver lanes (default: %(default)s)")
     p.add_argument("--dtype", nargs="+", default=["float32", "float64"],
                    choices=["float32", "float64"], help="precisions to run (default: both)")
@@ -235,7 +254,6 @@ def _add_compare_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cpu-devices", default=None, metavar="N|all",
                    help="split the CPU into N JAX devices ('all': one per core, at most 8) so every core runs lanes "
                         "(default: JAX's one CPU device; `make demo` passes 'all')")
-    p.add_argument("--eta", type=float, default=1.333, help="eta_in / eta_out (default: %(default)s, water)")
     p.add_argument("--seed", type=int, default=0, help="receiver and reference seed (default: %(default)s)")
     p.add_argument("--json", default=None, help="write the full results as JSON to this path (default: none)")
     p.add_argument("--figure", default=None,
@@ -284,27 +302,37 @@ def export_size_warning(kernels, count: int, lanes: int, n_scenes: int) -> str |
 def _export(args) -> int:
     from .. import export
 
+    opts = scene_options(args, {"scene": None, "light": None, "floor_depth": None, "eta": None, "lanes": 256})
+    own = None
+    if opts["scene"] is not None:  # the user's mesh: exported alone unless kernels or scenes are named too
+        own = export.mesh_file_scene(opts["scene"], light=opts["light"], floor_depth=opts["floor_depth"],
+                                     eta=1.333 if opts["eta"] is None else opts["eta"])
+    elif opts["light"] is not None or opts["floor_depth"] is not None or opts["eta"] is not None:
+        raise ValueError("--light, --floor-depth and --eta place a mesh of your own: give it with --scene PATH "
+                         "(or `scene = ...` in --scene-file); the built-in scenes keep their own")
     kernels = _selection(args.kernels, export.KERNELS)
     scenes = _selection(args.scenes, export.SCENES)
-    if kernels is None and scenes is None:  # nothing named: everything
+    if kernels is None and scenes is None and own is None:  # nothing named: everything
         kernels, scenes = list(export.KERNELS), list(export.SCENES)
     kernels, scenes = kernels or [], scenes or []  # one group named: only that one
-    if not kernels and not scenes:  # (`--scenes none` alone had written 0 files and exited 0)
+    if not kernels and not scenes and own is None:  # (`--scenes none` alone had written 0 files and exited 0)
         print("caustics-jax export: nothing to export: the selection names no kernel and no scene "
               "(`--scenes none` alone exports no kernel either; name the kernels, or 'all')", file=sys.stderr)
         return 2
+    n_scenes = len(scenes) + (own is not None)
     if args.count >= 4 and all(k in export.KERNELS for k in kernels):  # else export() says what is wrong
-        warning = export_size_warning(kernels, args.count, args.lanes, len(scenes))
+        warning = export_size_warning(kernels, args.count, opts["lanes"], n_scenes)
         if warning:
             print(f"caustics-jax export: {warning}", file=sys.stderr)
     try:
         written = export.export(args.out, kernels=kernels, count=args.count, seed=args.seed, scenes=scenes,
-                                lanes=args.lanes)
+                                lanes=opts["lanes"], extra_scenes=[own] if own is not None else [])
     except ValueError as exc:
         print(f"caustics-jax export: {exc}", file=sys.stderr)
         return 2
+    names = scenes + ([own.name] if own is not None else [])
     print(f"wrote {len(written)} files to {args.out} (kernels: {', '.join(kernels) or 'none'}; "
-          f"scenes: {', '.join(scenes) or 'none'})")
+          f"scenes: {', '.join(names) or 'none'})")
     return 0
 
 
@@ -332,7 +360,12 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--count", type=int, default=256,
                    help="random + planted records per kernel (a quarter planted; adversarial cases come on "
                         "top; default: %(default)s)")
-    p.add_argument("--lanes", type=int, default=256, help="lanes per scene (default: %(default)s)")
+    p.add_argument("--scene", default=None, metavar="PATH",
+                   help="your own mesh file (any format trimesh reads), exported alone as one scene named after "
+                        "the file's stem, placed as `compare --scene PATH` places it; with --light, "
+                        "--floor-depth, --eta or --scene-file")
+    _add_scene_args(p)
+    p.add_argument("--lanes", type=int, default=None, help="lanes per scene (default: 256)")
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes (default: %(default)s)")
 
 

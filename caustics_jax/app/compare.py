@@ -3,7 +3,8 @@
 One run measures, per solver configuration and dtype, on the same scene and receivers:
 
 - success rate against the exhaustive float64 reference (`method="exhaustive"`) on a
-  subset of the receivers (`ref_n` lanes, mesh up to `MAX_REFERENCE_FACES` triangles):
+  subset of the receivers (`ref_n` lanes; the culled reference costs a fraction of a
+  millisecond per lane on meshes of 100k triangles, docs/solvers.md, so any mesh gets one):
   the fraction of lanes with at least one solution where the solver returned one, and
   the fraction where it returned the one nearest the start point `M0`;
 - position error (m) of each returned point against the nearest reference solution (on
@@ -29,11 +30,18 @@ from collections.abc import Callable
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..accel.start_points import start_points
-from ..runtime.arguments import check_bool, check_eta, check_fits, check_int, check_scene_scale
+from ..runtime.arguments import (
+    check_bool,
+    check_eta,
+    check_fits,
+    check_int,
+    check_real,
+    check_scene_scale,
+    is_real_scalar,
+)
 from ..runtime.precision import precision
 from ..runtime.progress import progress
 from ..solvers import solve
@@ -42,8 +50,6 @@ from ..surface import scenes
 from ..surface.scenes import MAX_TRIANGLES
 from ..testing.oracle import NumpyMesh, barycentric_point, refraction_angle_error
 from .reporting import log, stats
-
-MAX_REFERENCE_FACES = 20_000
 
 # name -> (method, options). "best optimistix Newton" is chosen among the newton-* rows.
 CONFIGS: dict[str, tuple[str, dict]] = {
@@ -68,17 +74,17 @@ CONFIGS: dict[str, tuple[str, dict]] = {
 }
 DEFAULT_CONFIGS = ("walk", "newton-hv-step", "newton-hv", "newton-ad", "lm-hv")
 SCENES: dict[str, Callable] = {
-    "wavy": lambda n, dt: scenes.wavy_pool(n, dtype=dt),
-    "wavy_steep": lambda n, dt: scenes.wavy_pool(n, amplitude=0.08, dtype=dt),
-    "wavy_jittered": lambda n, dt: scenes.wavy_pool(n, choppiness=0.5, dtype=dt),
+    "wavy": lambda n, dt, **kw: scenes.wavy_pool(n, dtype=dt, **kw),
+    "wavy_steep": lambda n, dt, **kw: scenes.wavy_pool(n, amplitude=0.08, dtype=dt, **kw),
+    "wavy_jittered": lambda n, dt, **kw: scenes.wavy_pool(n, choppiness=0.5, dtype=dt, **kw),
     # Past the focal distance: steep waves over a floor 3 m down, where several paths reach
     # one receiver (the post-focal transect of experiments/irradiance_agreement.py).
-    "postfocal": lambda n, dt: scenes.wavy_pool(n, amplitude=0.3, depth=3.0, dtype=dt),
-    "flat": lambda n, dt: scenes.flat_pool(n, dtype=dt),
-    "lagoon": lambda n, dt: scenes.lagoon(n, dtype=dt),
+    "postfocal": lambda n, dt, **kw: scenes.wavy_pool(n, dtype=dt, **{"amplitude": 0.3, "depth": 3.0, **kw}),
+    "flat": lambda n, dt, **kw: scenes.flat_pool(n, dtype=dt, **kw),
+    "lagoon": lambda n, dt, **kw: scenes.lagoon(n, dtype=dt, **kw),
 }
-# `--scene PATH`: a mesh file trimesh reads (`SurfaceMesh.from_trimesh(trimesh.load(path))`).
-MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
+# `--scene PATH`: a mesh file trimesh reads (`surface.scenes.load_mesh`).
+MESH_SUFFIXES = scenes.MESH_SUFFIXES
 
 
 def is_scene_path(scene: str) -> bool:
@@ -86,60 +92,23 @@ def is_scene_path(scene: str) -> bool:
     return str(scene).lower().endswith(MESH_SUFFIXES)
 
 
-def scene_from_mesh(surface, name: str = "mesh") -> scenes.Scene:
-    """A comparison scene around any surface: the receivers and light a mesh file gets.
-
-    With `W` the larger side of the surface's xy bounding box, the floor is the plane
-    `z = z_min - W / 4` under the whole xy extent (receivers on a 32 x 32 grid there,
-    normals +z; `compare` lays its own `n` lanes on the same plane and extent) and a point
-    light stands at `centre + (0.1 W, -0.075 W)` in xy, `0.75 W` above the highest vertex:
-    the proportions of the built-in pools (4 m wide, floor 1 m down, light at
-    (0.4, -0.3, 3) m). The surface's normals must face the light (+z); refraction is from
-    above into the medium below, as in every scene.
-    """
-    V = np.asarray(surface.vertices, np.float64)
-    lo, hi = V.min(0), V.max(0)
-    W = float(max(hi[0] - lo[0], hi[1] - lo[1]))
-    if not W > 0:
-        raise ValueError(f"scene {name!r}: the surface has no xy extent (bounding box {lo} .. {hi})")
-    centre = 0.5 * (lo[:2] + hi[:2])
-    u = (np.arange(32) + 0.5) / 32
-    X, Y = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]), indexing="xy")
-    R = np.stack([X.ravel(), Y.ravel(), np.full(X.size, lo[2] - W / 4)], -1)
-    light = np.array([centre[0] + 0.1 * W, centre[1] - 0.075 * W, hi[2] + 0.75 * W])
-    dtype = surface.dtype
-    lights = scenes.Lights(position=jnp.asarray(light[None], dtype),
-                           direction=jnp.asarray((light / np.linalg.norm(light))[None], dtype),
-                           directional=(False,))
-    return scenes.Scene(surface=surface, receivers=jnp.asarray(R, dtype),
-                        receiver_normals=jnp.asarray(np.broadcast_to([0.0, 0.0, 1.0], R.shape), dtype),
-                        lights=lights, is_grid=False, name=name)
-
-
-def load_scene(scene: str, n_triangles: int = 8192, dtype="float64") -> scenes.Scene:
+def load_scene(scene: str, n_triangles: int = 8192, dtype="float64", *, light=None,
+               floor_depth: float | None = None) -> scenes.Scene:
     """A named scene of `SCENES` at `n_triangles`, or a mesh file (OBJ, PLY, GLB, ...) read by
-    trimesh with the floor and light of `scene_from_mesh` (`n_triangles` unused then)."""
+    trimesh with the floor and light of `surface.scenes.scene_around` (`n_triangles` unused
+    then). `light` (a point) and `floor_depth` (m below the surface; the named pools' `depth`)
+    replace the scene's own."""
     if not is_scene_path(scene):
         if scene not in SCENES:
             raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
                              f"({', '.join(MESH_SUFFIXES)}), got {scene!r}")
-        return SCENES[scene](n_triangles, dtype)
-    import trimesh
+        kw = {} if light is None else {"light_position": tuple(float(x) for x in light)}
+        return SCENES[scene](n_triangles, dtype, **kw, **({} if floor_depth is None else {"depth": floor_depth}))
+    surface = scenes.load_mesh(scene, dtype)
+    name = f"{Path(scene).name} ({surface.faces.shape[0]} triangles)"
+    return scenes.scene_around(surface, light=light, floor_depth=floor_depth, name=name)
 
-    from ..surface.mesh import SurfaceMesh
 
-    path = Path(scene).expanduser()
-    if not path.is_file():
-        raise ValueError(f"scene file {str(path)!r} does not exist")
-    try:
-        loaded = trimesh.load(path)
-    except Exception as exc:  # trimesh raises many types for unreadable files
-        raise ValueError(f"scene file {str(path)!r} could not be read by trimesh: {exc}") from None
-    try:
-        surface = SurfaceMesh.from_trimesh(loaded, dtype=dtype)
-    except ValueError as exc:
-        raise ValueError(f"scene file {str(path)!r} holds no usable triangle mesh: {exc}") from None
-    return scene_from_mesh(surface, name=f"{path.name} ({surface.faces.shape[0]} triangles)")
 # Acceptance tolerances of the Pareto sweep (|f| = sine of the angle error), per dtype;
 # float32 stops at 1e-6, the noise floor of f in float32 (docs/kernels.md, float32 audit).
 SWEEP_TOLS = {"float32": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
@@ -167,6 +136,8 @@ class CompareConfig:
     eta: float = 1.333
     seed: int = 0
     keep_lanes: bool = False  # per-lane statuses and receivers in the report (floor maps of failures)
+    light: tuple[float, float, float] | None = None  # a point light replacing the scene's
+    floor_depth: float | None = None  # the receivers' floor, m below the surface (the pools' depth)
 
     def validate(self) -> None:
         """Raise `ValueError` naming the first bad field and its valid range (before any work)."""
@@ -185,6 +156,12 @@ class CompareConfig:
         check_eta(self.eta)
         check_bool("sweep", self.sweep)
         check_bool("keep_lanes", self.keep_lanes)
+        if self.light is not None:
+            light = np.asarray(self.light, float) if all(is_real_scalar(x) for x in self.light) else None
+            if light is None or light.shape != (3,) or not np.all(np.isfinite(light)):
+                raise ValueError(f"light must be one finite point (x, y, z), got {self.light!r}")
+        if self.floor_depth is not None:
+            check_real("floor_depth", self.floor_depth, 0, lo_open=True)
         if not is_scene_path(self.scene) and self.scene not in SCENES:
             raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
                              f"({', '.join(MESH_SUFFIXES)}), got {self.scene!r}")
@@ -213,7 +190,7 @@ class CompareConfig:
 def scene_arrays(cfg: CompareConfig):
     """The float64 scene, `n` receivers (floor grid) and their light endpoints, as numpy."""
     side = int(np.ceil(np.sqrt(cfg.n)))
-    sc = load_scene(cfg.scene, cfg.n_triangles, "float64")
+    sc = load_scene(cfg.scene, cfg.n_triangles, "float64", light=cfg.light, floor_depth=cfg.floor_depth)
     lo = np.asarray(sc.surface.vertices)[:, :2].min(0)
     hi = np.asarray(sc.surface.vertices)[:, :2].max(0)
     depth = float(np.asarray(sc.receivers)[0, 2])
@@ -280,11 +257,19 @@ def _errors(sol, ref_mesh, P, L, eta, ref):
     return out
 
 
+def solution_counts(lanes_with) -> str:
+    """`lanes with 0 / 1 / 2 solutions: 3 / 500 / 9` from `lanes_with[k]`, the lanes with `k`
+    solutions (`np.bincount` of the per-lane counts)."""
+    k = [int(x) for x in lanes_with]
+    shown = [i for i in range(len(k)) if k[i]]
+    return (f"lanes with {' / '.join(map(str, shown))} solutions: "
+            f"{' / '.join(str(int(k[i])) for i in shown)}") if shown else "no lanes"
+
+
 def reference(cfg: CompareConfig, sc, P, L):
-    """Exhaustive float64 solutions on `ref_n` lanes (None when the mesh is too large)."""
-    F = sc.surface.faces.shape[0]
-    if cfg.ref_n == 0 or F > MAX_REFERENCE_FACES:
-        log(f"no exhaustive reference: {F} faces > {MAX_REFERENCE_FACES} or ref_n = 0")
+    """Exhaustive float64 solutions on `ref_n` lanes (None when `ref_n` is 0)."""
+    if cfg.ref_n == 0:
+        log("no exhaustive reference (ref_n = 0)")
         return None
     rng = np.random.default_rng(cfg.seed + 1)
     idx = np.sort(rng.choice(len(P), min(cfg.ref_n, len(P)), replace=False))
@@ -293,8 +278,9 @@ def reference(cfg: CompareConfig, sc, P, L):
     M0 = np.asarray(ex.solution.start_point)
     d = np.linalg.norm(ex.all_points - M0[:, None], axis=-1)
     d = np.where(np.arange(ex.all_points.shape[1])[None] < ex.count[:, None], d, np.inf)
-    log(f"exhaustive reference: {len(idx)} lanes in {time.perf_counter() - t:.1f} s, "
-        f"solutions per lane {np.bincount(ex.count).tolist()}")
+    seconds = time.perf_counter() - t
+    log(f"exhaustive reference: {len(idx)} lanes on {sc.surface.faces.shape[0]} faces in {seconds:.1f} s "
+        f"(its compilation included); {solution_counts(np.bincount(ex.count))}")
     return {"idx": idx, "all_points": ex.all_points, "count": ex.count,
             "nearest_M0": np.argmin(d, 1), "seconds": time.perf_counter() - t}
 

@@ -59,6 +59,7 @@ from .records import (
     record_fields,
 )
 from .registry import KERNELS, Kernel, register
+from .scene_cases import mesh_file_scene, scene_name
 from .scene_records import BUFFER_ALIGNMENT, BUFFERS, load_scene, pack_scene, read_scene, scene_c_header
 from .scene_registry import SCENES, SceneData, SceneSpec, register_scene
 from .scene_writer import export_scene, write_scenes
@@ -111,6 +112,7 @@ __all__ = [
     "load",
     "load_audit",
     "load_scene",
+    "mesh_file_scene",
     "pack_records",
     "pack_scene",
     "read_records",
@@ -120,6 +122,7 @@ __all__ = [
     "register_scene",
     "scene_c_header",
     "scene_cases",
+    "scene_name",
     "ulp_distance",
     "write_scenes",
 ]

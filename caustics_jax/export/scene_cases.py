@@ -18,7 +18,7 @@ from ..runtime.precision import precision
 from ..surface import scenes
 from ..testing.stress import stress_case
 from .records import CASES
-from .scene_registry import SceneData, register_scene
+from .scene_registry import SceneData, SceneSpec, register_scene
 
 #: Triangles of every exported surface.
 TRIANGLES = 2048
@@ -57,6 +57,55 @@ def _floor_lanes(rng, scene, n, source, case=None) -> SceneData:
     return SceneData(*_surface(scene), P=P, L=_lights(rng, n), receiver_normal=n_P,
                      intensity=rng.uniform(0.5, 2.0, n), sigma_t=np.where(np.arange(n) % 3 == 0, 0.2, 0.0),
                      case=np.full(n, CASES["random"], np.uint32) if case is None else case, eta=ETA, source=source)
+
+
+def scene_name(path) -> str:
+    """The name a mesh file's scene gets in manifests and reports: its stem, with characters
+    other than letters, digits, `_` and `-` replaced by `_`."""
+    import re
+    from pathlib import Path
+
+    name = re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem)
+    if not name:
+        raise ValueError(f"scene file {str(path)!r} has no name to export it under")
+    return name
+
+
+def mesh_file_scene(path, *, light=None, floor_depth: float | None = None, eta: float = ETA) -> SceneSpec:
+    """A scene of the user's own mesh file (any format trimesh reads), placed as `caustics-jax
+    compare --scene PATH` places it (`surface.scenes.scene_around`: the floor `floor_depth`
+    below it, default a quarter of its width, and a point light `light` above it); lanes are
+    receivers drawn uniformly on the floor under the surface's xy extent, all under that
+    light. Named after the file's stem (`scene_name`). The file is read and checked now, so a
+    bad path or mesh is a `ValueError` before any export work."""
+    from ..runtime.arguments import check_eta
+
+    eta = check_eta(eta)
+    with precision("float64"):
+        scene = scenes.scene_around(scenes.load_mesh(path, "float64"), light=light, floor_depth=floor_depth,
+                                    name=scene_name(path))
+    vertices, faces, normals, grid = _surface(scene)
+    z_floor = float(np.asarray(scene.receivers)[0, 2])
+    L0 = np.asarray(scene.lights.position, np.float64)[0]
+    lo, hi = vertices[:, :2].min(0), vertices[:, :2].max(0)
+
+    def build(rng, n):
+        P = np.concatenate([rng.uniform(lo, hi, (n, 2)), np.full((n, 1), z_floor)], -1)
+        return SceneData(vertices, faces, normals, grid, P=P, L=np.broadcast_to(L0, (n, 3)).copy(),
+                         receiver_normal=np.broadcast_to([0.0, 0.0, 1.0], (n, 3)).copy(),
+                         intensity=rng.uniform(0.5, 2.0, n), sigma_t=np.where(np.arange(n) % 3 == 0, 0.2, 0.0),
+                         case=np.full(n, CASES["random"], np.uint32), eta=eta,
+                         source=f"mesh file {pathlib_name(path)} ({len(faces)} triangles), floor at z = "
+                                f"{z_floor:.6g}, point light at {L0.tolist()}")
+
+    return SceneSpec(scene.name, f"the mesh file {pathlib_name(path)}", build)
+
+
+def pathlib_name(path) -> str:
+    """The file name of `path` (no directories: manifests do not record the user's paths)."""
+    from pathlib import Path
+
+    return Path(path).name
 
 
 def _side(n):

@@ -382,19 +382,20 @@ def ref_tol(walk: Walk) -> float:
     return Walk(max_steps=walk.max_steps, bracket=walk.bracket).tolerance(np.float64)
 
 
-def write_scenes(out, names, lanes: int, seed: int) -> list:
-    """Write `<scene>.json` and `<scene>.bin` per scene of `names` and `caustics_scene.h` into
-    the existing directory `out`; returns the paths written."""
+def write_scenes(out, specs, lanes: int, seed: int) -> list:
+    """Write `<scene>.json` and `<scene>.bin` per scene of `specs` (`SceneSpec`s: registered
+    ones or a mesh file's, `scene_cases.mesh_file_scene`) and `caustics_scene.h` into the
+    existing directory `out`; returns the paths written."""
     import json
     from pathlib import Path
 
     from .scene_records import scene_c_header
-    from .scene_registry import SCENES
 
     out = Path(out)
     written = []
-    for name in names:
-        manifest, raw = export_scene(SCENES[name], lanes, seed)
+    for spec in specs:
+        name = spec.name
+        manifest, raw = export_scene(spec, lanes, seed)
         (out / f"{name}.json").write_text(json.dumps(manifest, indent=1) + "\n")
         (out / f"{name}.bin").write_bytes(raw)
         written += [out / f"{name}.json", out / f"{name}.bin"]

@@ -126,12 +126,19 @@ def main(argv=None, prog: str = "python -m caustics_jax.shaders.conformance") ->
     p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("data", help="directory written by `caustics-jax export`")
     p.add_argument("--kernels", nargs="+", default=None, choices=sorted(ex.KERNELS))
-    p.add_argument("--scenes", nargs="+", default=None, choices=sorted(ex.SCENES))
+    p.add_argument("--scenes", nargs="+", default=None, metavar="SCENE",
+                   help="scenes exported in DATA (built-in or your own mesh's; default: every one there)")
     p.add_argument("--json", default=None, help="write the reports as JSON here")
     args = p.parse_args(argv)
     data = Path(args.data)
+    exported = sc.exported_scenes(data)  # by manifest: a mesh file's scene has the file's name
+    missing = [s for s in args.scenes or [] if s not in exported]
+    if missing:
+        print(f"{prog}: no exported scene {missing} in {data} (exported: {', '.join(exported) or 'none'})",
+              file=sys.stderr)
+        return 2
     kernels = args.kernels if args.kernels or args.scenes else [k for k in ex.KERNELS if (data / f"{k}.json").exists()]
-    scenes = args.scenes if args.scenes or args.kernels else [s for s in ex.SCENES if (data / f"{s}.json").exists()]
+    scenes = args.scenes if args.scenes or args.kernels else exported
     if not kernels and not scenes:
         print(f"{prog}: no exported kernels or scenes in {data}", file=sys.stderr)
         return 2

@@ -207,7 +207,7 @@ def scene_report(manifest: dict, buffers: dict, got: dict) -> dict:
 def run_scenes(data_dir, scenes=None, work_dir=None, repeat: int = 1) -> list[dict]:
     """`run_scene` for every scene exported in `data_dir` (or `scenes`), one compiled shader."""
     data = Path(data_dir)
-    names = scenes or sorted(p.stem for p in data.glob("*.json") if _is_scene(p))
+    names = scenes or exported_scenes(data)
     if not names:
         raise ValueError(f"no exported scenes in {data_dir}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -215,6 +215,12 @@ def run_scenes(data_dir, scenes=None, work_dir=None, repeat: int = 1) -> list[di
         host = build_host(work)
         spv = compile_shader(scene_shader_source(), work / "scene.spv")
         return [run_scene(data, s, work, host=host, spv=spv, repeat=repeat) for s in names]
+
+
+def exported_scenes(data_dir) -> list[str]:
+    """Names of the scenes exported in `data_dir` (their manifests), sorted: the built-in
+    ones and a mesh file's (`caustics-jax export --scene PATH`) alike."""
+    return sorted(p.stem for p in Path(data_dir).glob("*.json") if _is_scene(p))
 
 
 def _is_scene(path: Path) -> bool:

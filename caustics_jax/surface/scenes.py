@@ -269,6 +269,61 @@ def lagoon(
 # --------------------------------------------------------------------------- helpers
 
 
+#: File suffixes `load_mesh` reads (what trimesh reads that holds triangles).
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+def load_mesh(path, dtype="float64") -> SurfaceMesh:
+    """The `SurfaceMesh` of a mesh file trimesh reads (`MESH_SUFFIXES`), in `dtype`; a
+    `ValueError` naming the file when it is missing, unreadable or holds no usable mesh."""
+    import pathlib
+
+    import trimesh
+
+    path = pathlib.Path(path).expanduser()
+    if not path.is_file():
+        raise ValueError(f"scene file {str(path)!r} does not exist")
+    try:
+        loaded = trimesh.load(path)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise ValueError(f"scene file {str(path)!r} could not be read by trimesh: {exc}") from None
+    try:
+        return SurfaceMesh.from_trimesh(loaded, dtype=dtype)
+    except ValueError as exc:
+        raise ValueError(f"scene file {str(path)!r} holds no usable triangle mesh: {exc}") from None
+
+
+def scene_around(surface: SurfaceMesh, *, light=None, floor_depth: float | None = None, n_receivers: int = 32,
+                 name: str = "mesh") -> Scene:
+    """A scene around any surface: receivers on a floor under it and a point light above it.
+
+    With `W` the larger side of the surface's xy bounding box, the floor is the plane
+    `floor_depth` (default `W / 4`) below the lowest vertex, under the whole xy extent
+    (receivers on an `n_receivers x n_receivers` grid there, normals +z), and the light is
+    `light` (a point `(3,)`), by default at `centre + (0.1 W, -0.075 W)` in xy, `0.75 W`
+    above the highest vertex: the proportions of the built-in pools (4 m wide, floor 1 m
+    down, light at (0.4, -0.3, 3) m). The surface's normals must face the light (+z);
+    refraction is from above into the medium below, as in every scene.
+    """
+    V = np.asarray(surface.vertices, np.float64)
+    lo, hi = V.min(0), V.max(0)
+    W = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    if not W > 0:
+        raise ValueError(f"scene {name!r}: the surface has no xy extent (bounding box {lo} .. {hi})")
+    n_receivers = check_int("n_receivers", n_receivers, 1, MAX_RECEIVERS_PER_SIDE)
+    depth = W / 4 if floor_depth is None else check_real("floor_depth", floor_depth, 0, lo_open=True)
+    centre = 0.5 * (lo[:2] + hi[:2])
+    if light is None:
+        light = np.array([centre[0] + 0.1 * W, centre[1] - 0.075 * W, hi[2] + 0.75 * W])
+    light = real_array("light", light)
+    if light.shape != (3,) or not np.all(np.isfinite(light)):
+        raise ValueError(f"light must be one finite point (x, y, z), got {light.tolist()}")
+    u = (np.arange(n_receivers) + 0.5) / n_receivers
+    X, Y = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]), indexing="xy")
+    R = np.stack([X.ravel(), Y.ravel(), np.full(X.size, lo[2] - depth)], -1)
+    return _scene(surface, R, np.broadcast_to([0.0, 0.0, 1.0], R.shape), "point", light, False, name)
+
+
 def _check_pool(n_triangles, seed, half_size, depth, n_receivers, receiver_jitter, light, light_position,
                 dtype, *, top: float) -> np.ndarray:
     """The generators' shared arguments, refused with `ValueError` before any work
