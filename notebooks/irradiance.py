@@ -45,7 +45,7 @@ LIGHT = np.array([0.4, -0.3, 3.0])
 UP = np.array([0.0, 0.0, 1.0])
 CELLS = 32 if QUICK else 64                     # receiver cells per side
 PHOTONS = 1 << (20 if QUICK else 23)
-plt.rcParams.update({"figure.dpi": 72, "savefig.dpi": "figure", "font.size": 9})
+plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": "figure", "font.size": 9})
 print(f"quick={QUICK}: {CELLS}² cells, {PHOTONS:,} photons")
 
 # %% [markdown]
@@ -84,7 +84,7 @@ print(f"walk float32 vs float64, cell averages: median relative {np.median(rel32
 # %%
 ext = (receiver.x0, receiver.x1, receiver.y0, receiver.y1)
 vmin, vmax = np.percentile(E_walk, [0.5, 99.5])
-fig, axes = plt.subplots(1, 4, figsize=(15, 3.6), dpi=56)
+fig, axes = plt.subplots(1, 4, figsize=(15, 3.6))
 for ax, E, title in ((axes[0], E_walk, "walk + D (cell averages)"),
                      (axes[1], pm.irradiance, f"photons, N = 2^{int(np.log2(pm.n_photons))}")):
     im = ax.imshow(E, origin="lower", extent=ext, vmin=vmin, vmax=vmax, cmap="inferno", interpolation="nearest")

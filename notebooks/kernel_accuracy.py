@@ -44,7 +44,7 @@ from caustics_jax.transport.photon_differentials import light_view_texels
 cj.enable_x64()  # float64 available; every array below states its dtype
 QUICK = os.environ.get("CAUSTICS_JAX_QUICK", "") not in ("", "0")
 COUNT = 256 if QUICK else 4096
-plt.rcParams.update({"figure.dpi": 72, "savefig.dpi": 72, "font.size": 9})
+plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 100, "font.size": 9})
 print(f"quick={QUICK}: {COUNT} records per kernel; kernels: {', '.join(export.KERNELS)}")
 
 # %% [markdown]

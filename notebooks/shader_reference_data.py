@@ -34,7 +34,7 @@ import numpy as np
 
 QUICK = os.environ.get("CAUSTICS_JAX_QUICK", "") not in ("", "0")
 COUNT = 64 if QUICK else 1024
-plt.rcParams.update({"figure.dpi": 72, "savefig.dpi": 72, "font.size": 9})
+plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 100, "font.size": 9})
 
 # %% [markdown]
 # ## Write an export

@@ -57,7 +57,7 @@ REF_N = 64 if QUICK else 512         # lanes checked against the exhaustive refe
 TRIANGLES = 2048                     # one mesh size class: every scene reuses the same compiles
 DTYPES = ("float32",) if QUICK else ("float32", "float64")
 CONFIGS = tuple(compare.CONFIGS)     # every configuration the package offers at run time
-plt.rcParams.update({"figure.dpi": 64, "savefig.dpi": 64, "font.size": 9})
+plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 100, "font.size": 9})
 print(f"quick={QUICK}: {N} lanes, {REF_N} reference lanes, dtypes {DTYPES}")
 print("solver configurations:", ", ".join(CONFIGS))
 

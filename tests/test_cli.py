@@ -200,3 +200,22 @@ def test_an_export_that_selects_nothing_is_an_error(capsys, tmp_path, argv):
     assert cli.main(["export", "--out", str(tmp_path / "d"), *argv]) == 2
     _one_line_error(capsys, "caustics-jax export: nothing to export", "no kernel and no scene")
     assert not (tmp_path / "d").exists()
+
+
+def test_warnings_from_the_command_line_are_one_line_with_the_command_not_the_entry_point(capsys):
+    """A warning raised during a command stays a warning (filters apply) but reads
+    `caustics-jax CMD: warning: ...`, not the entry-point script's path and line."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        with cli._warnings_as_lines("caustics-jax compare"):  # noqa: SLF001
+            warnings.warn("the light is below the surface", UserWarning, stacklevel=1)
+            warnings.warn("old option", DeprecationWarning, stacklevel=1)
+        err = capsys.readouterr().err
+        assert err == ("caustics-jax compare: warning: the light is below the surface\n"
+                       "caustics-jax compare: DeprecationWarning: old option\n")
+        warnings.simplefilter("ignore")
+        with cli._warnings_as_lines("caustics-jax compare"):  # noqa: SLF001
+            warnings.warn("ignored", UserWarning, stacklevel=1)
+        assert capsys.readouterr().err == ""

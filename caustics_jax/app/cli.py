@@ -16,9 +16,11 @@ show a progress bar on a terminal only (`caustics_jax.runtime.progress`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
 from .._version import __version__
@@ -32,7 +34,8 @@ def _fmt(x, spec=".2e"):
 
 def format_table(report: dict) -> str:
     """The comparison as a fixed-width text table, one row per configuration and dtype."""
-    head = (f"{'config':<16}{'dtype':<9}{'success':>8}{'@M0':>7}{'found':>8}"
+    w = max([16] + [len(r["config"]) + 2 for r in report["rows"]])  # names never run into the dtype
+    head = (f"{'config':<{w}}{'dtype':<9}{'success':>8}{'@M0':>7}{'found':>8}"
             f"{'pos med':>10}{'pos p99':>10}{'pos max':>10}{'ang med':>10}{'ang p99':>10}"
             f"{'ang max':>10}{'it med':>7}{'it p99':>7}{'compile':>9}{'solves/s':>11}")
     lines = [f"scene {report['scene']}, {report['n']} lanes "
@@ -42,7 +45,7 @@ def format_table(report: dict) -> str:
         pos = r["position_error_m"] or {}
         ang = r["angle_error_rad"]
         lines.append(
-            f"{r['config']:<16}{r['dtype']:<9}{_fmt(r['success'], '.4f'):>8}"
+            f"{r['config']:<{w}}{r['dtype']:<9}{_fmt(r['success'], '.4f'):>8}"
             f"{_fmt(r['nearest_M0'], '.3f'):>7}{r['found']:>8.4f}"
             f"{_fmt(pos.get('median')):>10}{_fmt(pos.get('p99')):>10}{_fmt(pos.get('max')):>10}"
             f"{_fmt(ang['median']):>10}{_fmt(ang['p99']):>10}{_fmt(ang['max']):>10}"
@@ -369,6 +372,24 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes (default: %(default)s)")
 
 
+@contextlib.contextmanager
+def _warnings_as_lines(prog: str):
+    """Warnings stay warnings (filters apply as usual), but are shown as one line
+    `prog: warning: message`: from the command line, the caller the package names is the
+    entry-point script, whose path told the user nothing."""
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        name = "warning" if category is UserWarning else category.__name__
+        print(f"{prog}: {name}: {message}", file=sys.stderr if file is None else file)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = shown
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its usage errors on one line (the usage itself is what `--help` is for)."""
 
@@ -406,7 +427,8 @@ def main(argv=None) -> int:
     # A user error is one line on stderr and exit status 2, never a traceback
     # (docs/input_contract.md "Command line"); files that cannot be written: status 1.
     try:
-        return run(args)
+        with _warnings_as_lines(f"caustics-jax {args.command}"):
+            return run(args)
     except ValueError as exc:
         print(f"caustics-jax {args.command}: {exc}", file=sys.stderr)
         return 2
