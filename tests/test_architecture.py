@@ -233,6 +233,10 @@ def test_every_name_in_the_code_map_exists():
     assert missing == []
 
 
+#: The sibling folder of the shared design documents: outside the repository.
+OUTSIDE = "../" + "shared"
+
+
 def _math_sections() -> set[str]:
     """Section numbers of docs/math.md: `## 2. ...` gives "2", `### 2.3 ...` gives "2.3"."""
     text = (ROOT / "docs" / "math.md").read_text()
@@ -241,9 +245,9 @@ def _math_sections() -> set[str]:
 
 def test_every_math_citation_resolves_to_a_section_of_the_projects_math_reference():
     """The project stands on its own: every `math.md §N` in the package, the docs, the README,
-    the tests and experiments names a section of docs/math.md, no file points outside the
-    repository (`../shared`), and every "seed NNN" cited in the package is in the
-    bibliography."""
+    the tests and experiments names a section of docs/math.md, no file points at the
+    sibling folder of shared documents a clone does not have, and every "seed NNN" cited in
+    the package is in the bibliography."""
     sections = _math_sections()
     assert {str(n) for n in range(1, 9)} <= sections
     files = [*PACKAGE.rglob("*.py"), *PACKAGE.rglob("*.glsl"), *(ROOT / "docs").glob("*.md"), ROOT / "README.md",
@@ -252,7 +256,7 @@ def test_every_math_citation_resolves_to_a_section_of_the_projects_math_referenc
     for path in files:
         text = path.read_text()
         cited |= {(str(path.relative_to(ROOT)), n) for n in re.findall(r"math\.md ?§ ?(\d+(?:\.\d+)?)", text)}
-        if "../shared" in text and path != pathlib.Path(__file__):
+        if OUTSIDE in text and path != pathlib.Path(__file__):
             outside.append(str(path.relative_to(ROOT)))
     assert len(cited) > 50
     assert sorted((f, n) for f, n in cited if n not in sections) == []

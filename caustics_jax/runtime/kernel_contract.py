@@ -240,21 +240,24 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
         unsigned = {n for n in ints if n in hints and _unsigned(hints[n].annotation)}
         fn_name = fn.__name__
 
-        @functools.wraps(fn)
-        def wrapper(*args, **kwargs):
-            bound = sig.bind(*args, **kwargs)
-            bound.apply_defaults()
-            a = bound.arguments
-            for n in (*arrays, *params, *ints):  # None only where it is the documented default
-                if a[n] is None and sig.parameters[n].default is not None:
-                    raise ValueError(f"{fn_name}: {n} must be a real number or an array of real numbers, got None")
+        def result_dtype(a):
+            """The kernel's float dtype: `dtype_arg`'s, else by the rules from the arrays."""
             given = [(n, a[n]) for n in arrays if a[n] is not None]
-            if dtype_arg is not None:
-                dtype = check_float_dtype(a[dtype_arg])
-                for n, x in given:
-                    real_input_dtype(f"{fn_name}: {n}", x)
-            else:
-                dtype = result_float_dtype(*((f"{fn_name}: {n}", x) for n, x in given))
+            if dtype_arg is None:
+                return result_float_dtype(*((f"{fn_name}: {n}", x) for n, x in given))
+            for n, x in given:
+                real_input_dtype(f"{fn_name}: {n}", x)
+            return check_float_dtype(a[dtype_arg])
+
+        def batch_of(n, x):
+            """`(n, *batch shape)` of argument `n` checked against its annotation, or None."""
+            if not dims.get(n):
+                return None
+            batch = _check_shape(fn_name, n, x.shape, dims[n])
+            return None if batch is None else (n, batch)
+
+        def cast(a, dtype):
+            """Cast and check every declared argument in place; their `*batch` shapes."""
             batches = []
             for n in (*arrays, *params):
                 if a[n] is None:
@@ -264,20 +267,25 @@ def float_inputs(*arrays: str, params: tuple[str, ...] = (), ints: tuple[str, ..
                 if n in domains:
                     check_domain(fn_name, n, a[n], dtype=dtype, **domains[n])
                 a[n] = jnp.asarray(a[n], dtype)
-                if dims.get(n):
-                    batch = _check_shape(fn_name, n, a[n].shape, dims[n])
-                    if batch is not None:
-                        batches.append((n, batch))
+                batches.append(batch_of(n, a[n]))
             for n in ints:
                 if a[n] is None:
                     continue
                 a[n] = as_integer_array(f"{fn_name}: {n}", a[n], unsigned=n in unsigned)
                 if n in domains:
                     check_domain(fn_name, n, a[n], integer=True, **domains[n])
-                if dims.get(n):
-                    batch = _check_shape(fn_name, n, a[n].shape, dims[n])
-                    if batch is not None:
-                        batches.append((n, batch))
+                batches.append(batch_of(n, a[n]))
+            return [b for b in batches if b is not None]
+
+        @functools.wraps(fn)
+        def wrapper(*args, **kwargs):
+            bound = sig.bind(*args, **kwargs)
+            bound.apply_defaults()
+            a = bound.arguments
+            for n in (*arrays, *params, *ints):  # None only where it is the documented default
+                if a[n] is None and sig.parameters[n].default is not None:
+                    raise ValueError(f"{fn_name}: {n} must be a real number or an array of real numbers, got None")
+            batches = cast(a, result_dtype(a))
             if len(batches) > 1:
                 try:
                     np.broadcast_shapes(*(b for _, b in batches))
