@@ -33,6 +33,7 @@ from .math.objectives import (
 from .runtime.precision import enable_x64, precision
 from .solvers import Exhaustive, ExhaustiveSolution, Newton, Solution, Status, Trace, Walk, solve
 from .surface.features import SceneFeatures, features
+from .surface.lights import Directional
 from .surface.mesh import SurfaceMesh, cross_edge
 from .transport import (
     ReceiverGrid,
@@ -61,6 +62,7 @@ __all__ = [
     "conic_tangent",
     "conic_value",
     "cross_edge",
+    "Directional",
     "edge_barycentric",
     "edge_intersections",
     "enable_x64",

@@ -17,8 +17,8 @@
 # A water surface nobody here made (a jittered Delaunay triangulation with a few waves,
 # written as an OBJ file, as a modelling tool would), taken through everything a user
 # needs before porting: load it with trimesh, build a `SurfaceMesh`, solve the refraction
-# paths, compute the caustic irradiance on a floor under it, check it against photons,
-# and export shader reference data for it and run the GLSL ports on it
+# paths, compute the caustic irradiance on a floor under it, check it against photons
+# (under a point light and under the sun), and export shader reference data for it and run the GLSL ports on it
 # (`caustics-jax export --scene PATH`, `caustics-jax conformance DIR`;
 # docs/export.md "Your own mesh"). `CAUSTICS_JAX_QUICK=1` (what CI runs) uses fewer
 # receivers and photons.
@@ -103,6 +103,30 @@ fig.colorbar(im, ax=ax, label="irradiance (W/m², intensity 1 W/sr)")
 fig.suptitle("Caustic irradiance under your own mesh: walk against photons")
 plt.show()
 print(f"mean E: walk {E.mean():.4f}, photons {pm.irradiance.mean():.4f} W/m²")
+
+# %% [markdown]
+# ## 3b. Under the sun
+#
+# Water caustics under the sun: `cj.Directional(direction)`, with `direction` the way the
+# rays travel (the sun overhead is `(0, 0, -1)`), goes wherever the point light went. Its
+# `intensity` is the sun's irradiance on a plane perpendicular to its rays (W/m²), and the
+# irradiance is the limit of a point light at infinity (math.md §9). The photons are
+# parallel, through the same emission plane.
+
+# %%
+sun = cj.Directional([0.2, 0.1, -1.0])
+E_sun = np.asarray(cj.irradiance(mesh, P, sun, intensity=1000.0, receiver_normal=[0, 0, 1])).reshape(CELLS, CELLS)
+pm_sun = cj.photon_irradiance(mesh, sun, intensity=1000.0, n_photons=PHOTONS, receiver=grid)
+fig, ax = plt.subplots(1, 2, figsize=(8.4, 3.8), constrained_layout=True)
+vmax = float(np.percentile(E_sun, 99))
+for a, img, title in ((ax[0], E_sun, "walk: E at the cell centres"),
+                      (ax[1], pm_sun.irradiance, f"{PHOTONS:,} parallel photons")):
+    im = a.imshow(img, origin="lower", extent=(-1.2, 1.2, -1.2, 1.2), vmin=0, vmax=vmax, cmap="inferno")
+    a.set(title=title, xlabel="x (m)", ylabel="y (m)")
+fig.colorbar(im, ax=ax, label="irradiance (W/m², sun 1000 W/m²)")
+fig.suptitle("Under the sun (travelling along (0.2, 0.1, -1)): walk against photons")
+plt.show()
+print(f"mean E: walk {E_sun.mean():.1f}, photons {pm_sun.irradiance.mean():.1f} W/m²")
 
 # %% [markdown]
 # ## 4. Shader reference data for it, and the GLSL ports on it

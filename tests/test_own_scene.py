@@ -91,3 +91,22 @@ def test_compare_scene_options_move_the_light_and_the_floor_of_named_scenes_and_
                        ({"floor_depth": 0.0}, "floor_depth must be")):
         with pytest.raises(ValueError, match=match):
             CompareConfig(**bad).validate()
+
+
+def test_a_sun_scene_exports_and_passes_conformance(obj, tmp_path, capsys):
+    """`--sun`: the lanes carry the directional light's points at float32's limit distance
+    (math.md §9) and the radiant intensity that gives their `E_perp`; every lane stays
+    conditioned (the crossing tolerance's `|s| |d|`: with `|d|` alone every lane had been
+    set apart as a tie) and the GLSL port agrees with the testbed."""
+    out = tmp_path / "sun"
+    assert cli.main(["export", "--out", str(out), "--scene", str(obj), "--lanes", "64",
+                     "--sun", "0.3", "0.05", "-1"]) == 0
+    m = json.loads((out / "my_pool.json").read_text())
+    assert "directional light travelling along" in m["source"]
+    assert m["summary"]["conditioned"] == 64
+    code = cli.main(["conformance", str(out)])
+    captured = capsys.readouterr()
+    if code == 3:
+        pytest.skip(f"no Vulkan toolchain or device: {captured.err.strip()}")
+    assert code == 0, captured.err
+    assert "| my_pool | 64 (64) |" in captured.out

@@ -39,11 +39,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..runtime.arguments import warn_user
+from ..runtime.arguments import check_points, warn_user
 from ..runtime.lanes import power_of_two_bucket
 from ..runtime.precision import check_mesh_dtype
 from ..surface.features import SceneFeatures, mesh_features
 from ..surface.frames import grid_state, local_mesh, local_origin
+from ..surface.lights import Directional, light_points, scene_size
 from ..surface.mesh import SurfaceMesh
 from .start_points import Accel, FaceBVH, StartPoint, build_accel, build_bvh, check_segments
 from .start_points import start_points as start_points_on_mesh  # (this module's `start_points` wraps it)
@@ -254,7 +255,15 @@ def start_points(mesh: SurfaceMesh | PreparedSurface, P, L, *, method: str = "au
     lives): the padded copy, the features, a local copy for a mesh far from the origin;
     it checks the arrays (`mesh.check_arrays()`: NaN vertices are a `ValueError`) and
     warns once about a grid its vertices left. Inside a user's `jit` the analysis is still
-    computed eagerly (`jax.ensure_compile_time_eval`)."""
+    computed eagerly (`jax.ensure_compile_time_eval`).
+
+    `L` may be a `Directional` (the sun): its point on each receiver's ray toward the light,
+    as `solve` places it (`surface.lights.light_points`, math.md §9)."""
+    if isinstance(L, Directional):
+        V = mesh.mesh.vertices if isinstance(mesh, PreparedSurface) else mesh.vertices
+        P_np = check_points("P", P, mesh.dtype).reshape(-1, 3)
+        L = jnp.asarray(light_points(L, P_np, scene_size(np.asarray(V), P_np), mesh.dtype).points, mesh.dtype)
+        P = jnp.asarray(P_np, mesh.dtype)
     if isinstance(mesh, PreparedSurface):
         if method == "auto" and bvh is None and accel is None:
             return mesh.start_points(P, L)

@@ -229,11 +229,14 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--light", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="a point light (m) replacing the scene's (default: the scene's own; a mesh file's "
                         "stands 0.75 W above it, W its width)")
+    p.add_argument("--sun", type=float, nargs=3, default=None, metavar=("DX", "DY", "DZ"),
+                   help="a directional light instead: the direction its rays travel (the sun overhead is "
+                        "0 0 -1; caustics_jax.Directional)")
     p.add_argument("--floor-depth", type=float, default=None, metavar="D",
                    help="the receivers' floor, D m below the surface (default: the scene's; W / 4 for a mesh file)")
     p.add_argument("--eta", type=float, default=None, help="eta_in / eta_out (default: 1.333, water)")
     p.add_argument("--scene-file", default=None, metavar="FILE.toml",
-                   help="a TOML scene description (scene, light, floor_depth, eta, triangles, lanes); flags "
+                   help="a TOML scene description (scene, light or sun, floor_depth, eta, triangles, lanes); flags "
                         "given here win over it (docs/export.md, 'Your own mesh')")
 
 
@@ -311,7 +314,7 @@ def _export(args) -> int:
         own = export.mesh_file_scene(opts["scene"], light=opts["light"], floor_depth=opts["floor_depth"],
                                      eta=1.333 if opts["eta"] is None else opts["eta"])
     elif opts["light"] is not None or opts["floor_depth"] is not None or opts["eta"] is not None:
-        raise ValueError("--light, --floor-depth and --eta place a mesh of your own: give it with --scene PATH "
+        raise ValueError("--light, --sun, --floor-depth and --eta place a mesh of your own: give it with --scene PATH "
                          "(or `scene = ...` in --scene-file); the built-in scenes keep their own")
     kernels = _selection(args.kernels, export.KERNELS)
     scenes = _selection(args.scenes, export.SCENES)

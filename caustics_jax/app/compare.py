@@ -47,6 +47,7 @@ from ..runtime.progress import progress
 from ..solvers import solve
 from ..solvers.options import default_tol
 from ..surface import scenes
+from ..surface.lights import Directional, light_points, scene_size
 from ..surface.scenes import MAX_TRIANGLES
 from ..testing.oracle import NumpyMesh, barycentric_point, refraction_angle_error
 from .reporting import log, stats
@@ -96,13 +97,16 @@ def load_scene(scene: str, n_triangles: int = 8192, dtype="float64", *, light=No
                floor_depth: float | None = None) -> scenes.Scene:
     """A named scene of `SCENES` at `n_triangles`, or a mesh file (OBJ, PLY, GLB, ...) read by
     trimesh with the floor and light of `surface.scenes.scene_around` (`n_triangles` unused
-    then). `light` (a point) and `floor_depth` (m below the surface; the named pools' `depth`)
-    replace the scene's own."""
+    then). `light` (a point, or a `Directional`: the sun) and `floor_depth` (m below the
+    surface; the named pools' `depth`) replace the scene's own."""
     if not is_scene_path(scene):
         if scene not in SCENES:
             raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
                              f"({', '.join(MESH_SUFFIXES)}), got {scene!r}")
-        kw = {} if light is None else {"light_position": tuple(float(x) for x in light)}
+        if isinstance(light, Directional):  # the generators' directional light: toward it
+            kw = {"light": "directional", "light_position": tuple(float(x) for x in light.toward)}
+        else:
+            kw = {} if light is None else {"light_position": tuple(float(x) for x in light)}
         return SCENES[scene](n_triangles, dtype, **kw, **({} if floor_depth is None else {"depth": floor_depth}))
     surface = scenes.load_mesh(scene, dtype)
     name = f"{Path(scene).name} ({surface.faces.shape[0]} triangles)"
@@ -136,7 +140,7 @@ class CompareConfig:
     eta: float = 1.333
     seed: int = 0
     keep_lanes: bool = False  # per-lane statuses and receivers in the report (floor maps of failures)
-    light: tuple[float, float, float] | None = None  # a point light replacing the scene's
+    light: tuple[float, float, float] | Directional | None = None  # a point light or the sun replacing the scene's
     floor_depth: float | None = None  # the receivers' floor, m below the surface (the pools' depth)
 
     def validate(self) -> None:
@@ -156,7 +160,7 @@ class CompareConfig:
         check_eta(self.eta)
         check_bool("sweep", self.sweep)
         check_bool("keep_lanes", self.keep_lanes)
-        if self.light is not None:
+        if self.light is not None and not isinstance(self.light, Directional):
             light = np.asarray(self.light, float) if all(is_real_scalar(x) for x in self.light) else None
             if light is None or light.shape != (3,) or not np.all(np.isfinite(light)):
                 raise ValueError(f"light must be one finite point (x, y, z), got {self.light!r}")
@@ -198,7 +202,10 @@ def scene_arrays(cfg: CompareConfig):
     X, Y = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]), indexing="xy")
     P = np.stack([X.ravel(), Y.ravel(), np.full(side * side, depth)], -1)
     P = P[np.linspace(0, len(P) - 1, cfg.n).astype(int)]  # n lanes spread over the grid
-    L = np.asarray(sc.lights.endpoint(P, 0))
+    # A directional light as its points on the receivers' rays at float32's limit distance
+    # (surface/lights.py): one set of lanes for both dtypes and the float64 reference.
+    V = np.asarray(sc.surface.vertices)
+    L = light_points(sc.lights.source(0), P, scene_size(V, P), np.float32).points
     return sc, NumpyMesh.from_mesh(sc.surface), P, L
 
 

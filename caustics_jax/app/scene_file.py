@@ -5,7 +5,8 @@ A scene file names the scene and what the command line would otherwise say::
 
     # pool.toml
     scene = "pool.obj"          # a mesh file (relative to this file) or a named scene
-    light = [0.4, -0.3, 3.0]    # a point light (m)
+    light = [0.4, -0.3, 3.0]    # a point light (m), or instead:
+    # sun = [0.1, 0.05, -1.0]   # a directional light: the way its rays travel
     floor_depth = 1.0           # the receivers' floor, m below the surface's lowest point
     eta = 1.333                 # eta_in / eta_out
     triangles = 8192            # named scenes: tessellation (compare)
@@ -20,22 +21,26 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from ..runtime.arguments import check_eta, check_int, check_real, is_real_scalar
+from ..surface.lights import Directional
 
 #: Keys of a scene file and what each holds.
 KEYS = {"scene": "a mesh file path or a scene name", "light": "a point [x, y, z]",
+        "sun": "a direction [dx, dy, dz] the light travels (a directional light)",
         "floor_depth": "metres below the surface (> 0)", "eta": "eta_in / eta_out (> 0)",
         "triangles": "an integer (named scenes)", "lanes": "an integer (export)"}
 
 
-def check_light(name: str, value) -> tuple[float, float, float] | None:
+def check_light(name: str, value, what: str = "point x y z") -> tuple[float, float, float] | None:
     """`value` as one finite point `(x, y, z)` (None passes); `ValueError` naming `name`."""
     if value is None:
         return None
     ok = isinstance(value, list | tuple) and len(value) == 3 and all(is_real_scalar(x) for x in value)
     point = tuple(float(x) for x in value) if ok else ()
     if not ok or not all(abs(x) < float("inf") for x in point):
-        raise ValueError(f"{name} must be one finite point x y z, got {value!r}")
+        raise ValueError(f"{name} must be one finite {what}, got {value!r}")
     return point  # type: ignore[return-value]
 
 
@@ -63,6 +68,8 @@ def read_scene_file(path) -> dict:
         out["scene"] = str(local) if Path(scene).suffix and not Path(scene).is_absolute() else scene
     if "light" in data:
         out["light"] = check_light(f"{where}light", data["light"])
+    if "sun" in data:
+        out["sun"] = check_light(f"{where}sun", data["sun"], "direction dx dy dz")
     if "floor_depth" in data:
         out["floor_depth"] = check_real(f"{where}floor_depth", data["floor_depth"], 0, lo_open=True)
     if "eta" in data:
@@ -82,4 +89,14 @@ def scene_options(args, defaults: dict) -> dict:
         flag = getattr(args, key, None)
         out[key] = flag if flag is not None else from_file.get(key, default)
     out["light"] = check_light("--light", out.get("light"))
+    # The sun (`--sun` or `sun = [...]`): a Directional in place of the point light; a flag
+    # wins over the file, as for every key.
+    point_flag, sun_flag = getattr(args, "light", None), getattr(args, "sun", None)
+    if point_flag is not None and sun_flag is not None:
+        raise ValueError("--light (a point light) and --sun (a directional light) exclude each other: give one")
+    if "light" in from_file and "sun" in from_file:
+        raise ValueError(f"scene file {str(args.scene_file)!r}: light and sun exclude each other: give one")
+    sun = sun_flag if sun_flag is not None else (from_file.get("sun") if point_flag is None else None)
+    if sun is not None:
+        out["light"] = Directional(np.asarray(check_light("--sun", sun, "direction dx dy dz")))
     return out

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..runtime.precision import precision
 from ..surface import scenes
+from ..surface.lights import Directional, light_points, scene_size
 from ..testing.stress import stress_case
 from .records import CASES
 from .scene_registry import SceneData, SceneSpec, register_scene
@@ -74,7 +75,8 @@ def scene_name(path) -> str:
 def mesh_file_scene(path, *, light=None, floor_depth: float | None = None, eta: float = ETA) -> SceneSpec:
     """A scene of the user's own mesh file (any format trimesh reads), placed as `caustics-jax
     compare --scene PATH` places it (`surface.scenes.scene_around`: the floor `floor_depth`
-    below it, default a quarter of its width, and a point light `light` above it); lanes are
+    below it, default a quarter of its width, and a point light `light` above it, or a
+    `Directional`); lanes are
     receivers drawn uniformly on the floor under the surface's xy extent, all under that
     light. Named after the file's stem (`scene_name`). The file is read and checked now, so a
     bad path or mesh is a `ValueError` before any export work."""
@@ -86,17 +88,27 @@ def mesh_file_scene(path, *, light=None, floor_depth: float | None = None, eta: 
                                     name=scene_name(path))
     vertices, faces, normals, grid = _surface(scene)
     z_floor = float(np.asarray(scene.receivers)[0, 2])
-    L0 = np.asarray(scene.lights.position, np.float64)[0]
+    source = scene.lights.source(0)
     lo, hi = vertices[:, :2].min(0), vertices[:, :2].max(0)
+    if isinstance(source, Directional):
+        light = f"directional light travelling along {np.round(source.direction, 6).tolist()}"
+    else:
+        light = f"point light at {source.tolist()}"
 
     def build(rng, n):
         P = np.concatenate([rng.uniform(lo, hi, (n, 2)), np.full((n, 1), z_floor)], -1)
-        return SceneData(vertices, faces, normals, grid, P=P, L=np.broadcast_to(L0, (n, 3)).copy(),
+        # A directional light as its points on the lanes' rays at float32's limit distance,
+        # with the radiant intensity that gives E_perp there (surface/lights.py, math.md §9):
+        # the export's lanes stay point-light lanes, read by the shaders unchanged.
+        placed = light_points(source, P, scene_size(vertices, P), np.float32)
+        E_or_I = rng.uniform(0.5, 2.0, n)
+        intensity = np.where(placed.at_infinity, E_or_I * np.sum((placed.points - P) ** 2, -1), E_or_I)
+        return SceneData(vertices, faces, normals, grid, P=P, L=placed.points,
                          receiver_normal=np.broadcast_to([0.0, 0.0, 1.0], (n, 3)).copy(),
-                         intensity=rng.uniform(0.5, 2.0, n), sigma_t=np.where(np.arange(n) % 3 == 0, 0.2, 0.0),
+                         intensity=intensity, sigma_t=np.where(np.arange(n) % 3 == 0, 0.2, 0.0),
                          case=np.full(n, CASES["random"], np.uint32), eta=eta,
                          source=f"mesh file {pathlib_name(path)} ({len(faces)} triangles), floor at z = "
-                                f"{z_floor:.6g}, point light at {L0.tolist()}")
+                                f"{z_floor:.6g}, {light}")
 
     return SceneSpec(scene.name, f"the mesh file {pathlib_name(path)}", build)
 

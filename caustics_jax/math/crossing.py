@@ -7,8 +7,11 @@ Why the tolerance is not a constant. Möller & Trumbore (1997) compute the baryc
 `b = d . qvec / det`, `s = e2 . qvec / det` with `tvec = P - V0`, `pvec = d x e2`,
 `qvec = tvec x e1`, `det = e1 . pvec`. The coordinates of `P` and `V0` are known only to
 `u |x|` (`u` the unit roundoff of the dtype), so `tvec` carries an absolute error of about
-`delta = u (max(|P|, |V0|) + |d|)` (the last term: `d = L - P` was rounded too, and the
-crossing sits at `s <= 1` along it). First-order propagation gives
+`delta = u (max(|P|, |V0|) + |s| |d|)` (the last term: `d = L - P` was rounded too, to
+`u |d|`, which moves the line by `u |s| |d|` at the crossing's `s`; `|s|` is capped at 1, the
+segment's end. Before the cap on `s` the term was `u |d|` whatever `s`: with a light 1e8
+times farther than the scene, as a directional light is placed (math.md §9), every
+neighbour face then held the crossing "within rounding"). First-order propagation gives
 
     err(a) <= delta |pvec| / |det|,   err(b) <= delta |d| |e1| / |det|,
     err(s) <= delta |e1| |e2| / |det|
@@ -113,7 +116,11 @@ def triangle_crossing(P: Float[Array, "*batch 3"], d: Float[Array, "*batch 3"],
     tvec = P - frame.V0
     qvec = jnp.cross(tvec, e1)
     a, b, s = dot(tvec, pvec) * inv, dot(d, qvec) * inv, dot(e2, qvec) * inv
-    delta = C_ROUND * eps * (jnp.maximum(jnp.max(jnp.abs(P), -1), frame.V0_max) + jnp.max(jnp.abs(d), -1))
+    # `d`'s rounding (relative `eps`) moves the line by `eps |d|` per unit of `s`: at the
+    # crossing by `|s| eps |d|` (a far light's `d` is 1e8 times the scene, its crossing at
+    # `s ~ 1e-8`), at most `eps |d|` on the segment.
+    reach = jnp.minimum(jnp.abs(s), 1)
+    delta = C_ROUND * eps * (jnp.maximum(jnp.max(jnp.abs(P), -1), frame.V0_max) + reach * jnp.max(jnp.abs(d), -1))
     abs_inv = jnp.abs(inv)
     tol_a = 16 * eps + delta * jnp.sqrt(dot(pvec, pvec)) * abs_inv
     tol_b = 16 * eps + delta * len_d * len_e1 * abs_inv

@@ -201,10 +201,11 @@ def scale_range(dtype) -> tuple[float, float]:
     return float(info.tiny) ** 0.2, float(info.max) ** 0.25 / 8
 
 
-def check_scene_scale(vertices: np.ndarray, points: tuple, dtype) -> None:
+def check_scene_scale(vertices: np.ndarray, points: tuple, dtype, lights: tuple = ()) -> None:
     """A `ValueError` when the scene lies outside `scale_range(dtype)`: its largest
     coordinate (mesh vertices and every point of `points`) above the limit, or the extent of
-    the mesh (its bounding box's largest side) below it. Rescale the scene (metres to
+    the mesh (its bounding box's largest side) below it; or lights of `lights` so far that
+    the products of their distance and the scene's overflow. Rescale the scene (metres to
     kilometres, say) or use float64."""
     lo, hi = scale_range(dtype)
     name = np.dtype(dtype).name
@@ -213,6 +214,14 @@ def check_scene_scale(vertices: np.ndarray, points: tuple, dtype) -> None:
     if big > hi:
         raise ValueError(f"the scene's coordinates reach {big:.3g}, beyond what {name} resolves ({hi:.3g}: "
                          f"quartic products of lengths overflow); rescale the scene or use float64")
+    # The conic's products hold two lengths of the scene and two of `L - P` (seed 001
+    # eq. 10-12): with the light's coordinates `far`, `big^2 far^2 <= hi^4`, which for a
+    # light among the scene's coordinates is the bound above.
+    far = max([float(np.max(np.abs(X), initial=0.0)) for X in lights], default=0.0)
+    if far > big and big * far > hi * hi:
+        raise ValueError(f"the light's coordinates reach {far:.3g} in a scene reaching {big:.3g}, beyond what "
+                         f"{name} resolves (product {big * far:.3g} > {hi * hi:.3g}); pass a far light as "
+                         f"caustics_jax.Directional(direction), rescale the scene or use float64")
     extent = float(np.max(np.ptp(vertices, axis=0))) if vertices.size else 0.0
     if 0 < extent < lo:
         raise ValueError(f"the mesh spans {extent:.3g}, below what {name} resolves ({lo:.3g}: products of "

@@ -275,7 +275,10 @@ void cj_bracket_objective(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float e
 // the Python kernel reports invalid (thresholds sqrt(eps) of float32).
 float cj_safe_inv(float y, bool ok) { return ok ? 1.0 / y : 0.0; }
 
-void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, out float D, out uint valid) {
+// normalized: D / d_L^2 = |(L'_perp / d_L) x (L'_par / d_L)| instead (ray_differential_D(...,
+// normalized=True); math.md §9): finite for a far light, and a directional light's limit.
+void cj_ray_differential(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, bool normalized,
+                         out float D, out uint valid) {
     vec3 M, n_s, w_P, w_L;
     bool degenerate = cj_path_vectors(V, N, P, L, ab, M, n_s, w_P, w_L);
     float tiny = sqrt(CJ_EPS);
@@ -305,7 +308,10 @@ void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float 
         float mu_d = (eta * eta * cos_P * cj_safe_inv(cos_L, ok_L) + eta)
                      * (dot(W[j], n_s) + dot(w_P, n_s_d));          // eq. 30
         vec3 w_L_d = -eta * W[j] + mu_d * n_s + mu * n_s_d;         // eq. 31, -eta
-        L_d[j] = M_d - dot(M_d, w_L) * w_L + d_L * w_L_d;           // eq. 32
+        if (normalized)                                             // eq. 32 / d_L
+            L_d[j] = (M_d - dot(M_d, w_L) * w_L) * cj_safe_inv(d_L, d_L > 0.0) + w_L_d;
+        else
+            L_d[j] = M_d - dot(M_d, w_L) * w_L + d_L * w_L_d;       // eq. 32
     }
     D = cj_norm(cross(L_d[0], L_d[1]));                             // eq. 33
     ok = ok && cj_finite_positive(D);  // overflow beyond the scale band is no valid D
@@ -313,20 +319,30 @@ void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float 
     valid = ok ? 1u : 0u;
 }
 
+void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, out float D, out uint valid) {
+    cj_ray_differential(V, N, P, L, ab, eta, false, D, valid);
+}
+
 // Irradiance at P through the refraction point ab (seed 001 eq. 25 with the factors of
 // math.md §6; transport.contribution.path_irradiance): E = eta^2 T A cos(theta_P) I_e / D,
 // T = 1 - R the Fresnel transmittance from the light's side (cos = w_L . n_s, ratio 1/eta),
 // A = exp(-sigma_t |P - M|), cos(theta_P) = max(-w_P . n_P, 0). E = 0 where D is invalid.
+// Formed as (I_e / d_L^2) / (D / d_L^2), finite for far lights (a directional light's lanes
+// carry its point at the limit distance, math.md §9); D = (D / d_L^2) d_L^2 comes back.
 float cj_path_irradiance(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, float intensity,
                          vec3 receiver_normal, float sigma_t, out float D, out uint D_valid) {
     vec3 M, n_s, w_P, w_L;
     cj_path_vectors(V, N, P, L, ab, M, n_s, w_P, w_L);
-    cj_ray_differential_D(V, N, P, L, ab, eta, D, D_valid);
+    float D_n;
+    cj_ray_differential(V, N, P, L, ab, eta, true, D_n, D_valid);
+    float d_L = cj_norm(L - M);
+    D = D_n * d_L * d_L;
     float T = 1.0 - cj_fresnel_reflectance(dot(w_L, n_s), 1.0 / eta);
     float cos_P = max(-dot(w_P, cj_safe_normalize(receiver_normal)), 0.0);
     float A = exp(-sigma_t * cj_norm(P - M));
-    bool ok = D_valid != 0u && D > 0.0;
-    return ok ? eta * eta * T * A * cos_P * intensity / D : 0.0;
+    bool ok = D_valid != 0u && D_n > 0.0;
+    float E_perp = intensity / (d_L > 0.0 ? d_L * d_L : 1.0);
+    return ok ? eta * eta * T * A * cos_P * E_perp / D_n : 0.0;
 }
 
 // ------------------------------------------------------ screen space (seed 004 §3.3)

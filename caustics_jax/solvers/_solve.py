@@ -23,6 +23,7 @@ from ..runtime.blocks import lane_mesh, on_devices, run_blocks
 from ..runtime.compilation import enable_compilation_cache
 from ..surface.features import GENERAL, SceneFeatures
 from ..surface.features import check as check_features
+from ..surface.lights import Directional, light_points, scene_size
 from ..surface.mesh import SurfaceMesh
 from ._solution import Solution, Status
 from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
@@ -57,15 +58,21 @@ def check_lanes(mesh: SurfaceMesh, P, L, origin=None):
     """`P`, `L` broadcast to `(N, 3)` in the mesh's dtype (see `check_points`), moved by
     `-origin` (float64, before the cast) when given: `PreparedSurface.local`'s frame."""
     dtype = mesh.dtype
-    P_np, L_np = (check_points(name, X, dtype) for name, X in (("P", P), ("L", L)))
-    check_scene_scale(np.asarray(mesh.vertices), (P_np, L_np), dtype)
-    try:
-        P_np, L_np = np.broadcast_arrays(P_np.reshape(-1, 3) if P_np.ndim == 1 else P_np,
-                                         L_np.reshape(-1, 3) if L_np.ndim == 1 else L_np)
-    except ValueError as exc:
-        raise ValueError(f"P {P_np.shape} and L {L_np.shape} do not broadcast") from exc
-    if P_np.ndim != 2:
-        raise ValueError(f"P and L must broadcast to (N, 3), got {P_np.shape}")
+    P_np = check_points("P", P, dtype)
+    if not isinstance(L, Directional):
+        L_np = check_points("L", L, dtype)
+        try:
+            P_np, _ = np.broadcast_arrays(P_np.reshape(-1, 3) if P_np.ndim == 1 else P_np,
+                                          L_np.reshape(-1, 3) if L_np.ndim == 1 else L_np)
+        except ValueError as exc:
+            raise ValueError(f"P {P_np.shape} and L {L_np.shape} do not broadcast") from exc
+        if P_np.ndim != 2:
+            raise ValueError(f"P and L must broadcast to (N, 3), got {P_np.shape}")
+    P_np = P_np.reshape(-1, 3) if P_np.ndim == 1 else P_np
+    # A directional light, or a point light beyond the limit distance: the point on each
+    # receiver's ray toward it (surface/lights.py, math.md §9).
+    L_np = light_points(L, P_np, scene_size(np.asarray(mesh.vertices, np.float64), P_np), dtype).points
+    check_scene_scale(np.asarray(mesh.vertices), (P_np,), dtype, (L_np,))
     if origin is not None and np.any(origin):
         P_np, L_np = P_np - origin, L_np - origin
     # (cast and copied on the host: jnp.asarray of a numpy array compiles once per shape)
@@ -159,7 +166,8 @@ def solve(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333, meth
             a `PreparedSurface` from `caustics_jax.prepare(mesh)` (either way the host
             analysis runs once per mesh).
         P: `(N, 3)` receivers inside the medium (cast to the mesh's dtype).
-        L: `(N, 3)` light positions (or one `(3,)` broadcast to all).
+        L: `(N, 3)` light positions (or one `(3,)` broadcast to all), or a
+            `Directional(direction)` (the sun: surface/lights.py, math.md §9).
         eta: `eta_in / eta_out` (water 1.333), one finite positive number.
         method: "walk" (the default: seed 001 curve walk), "newton" (optimistix
             baselines), "exhaustive" (all solutions, the float64 reference), "trace"

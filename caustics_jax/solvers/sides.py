@@ -98,7 +98,8 @@ def no_crossing_cause(prep: PreparedSurface, P, L, crosses) -> str | None:
     if np.mean(hL < lo) > FRACTION:
         return (f"{count}: the light is below the surface (L lies {np.median(lo - hL):.4g} below its lowest "
                 "point, along its mean normal). L must lie outside the medium, on the side the normals point "
-                "to, and the receivers P inside it (math.md §1)")
+                "to, and the receivers P inside it (math.md §1); a Directional's direction is the way its "
+                "rays travel (the sun overhead is (0, 0, -1))")
     if np.mean(hP > hi) > FRACTION:
         return (f"{count}: the receivers are above the surface (P lies {np.median(hP - hi):.4g} above its "
                 "highest point, along its mean normal). The receivers P must lie inside the medium, behind the "

@@ -26,6 +26,7 @@ from jaxtyping import Array, Float
 
 from ..runtime.arguments import check_choice, check_fits, check_int, check_real, real_array
 from ..runtime.precision import check_float_dtype, default_float_dtype
+from .lights import Directional
 from .mesh import GridInfo, SurfaceMesh
 
 GRAVITY = 9.81
@@ -40,13 +41,16 @@ LIGHTS = ("point", "directional", "both")
 class Lights(eqx.Module):
     """Point and directional lights.
 
+    `source(k)` is light `k` as every solver, irradiance and photon function takes it: a
+    position `(3,)`, or a `Directional` (surface/lights.py) for a directional light.
+
     Attributes:
         position: `(K, 3)` position of each point light; for a directional light, the
-            point `far * direction` (only a representative; use `endpoint`).
+            point `far * direction` (only a representative; pass `source(k)`).
         direction: `(K, 3)` unit vector toward the light (for a point light, from the
             origin toward it).
         directional: static tuple of K flags, True for a directional light.
-        far: static distance used to turn a directional light into a segment end.
+        far: static distance of `endpoint`'s stand-in point for a directional light.
     """
 
     position: Float[Array, "K 3"]
@@ -54,9 +58,20 @@ class Lights(eqx.Module):
     directional: tuple[bool, ...] = eqx.field(static=True)
     far: float = eqx.field(static=True, default=100.0)
 
+    def source(self, k: int = 0):
+        """Light `k` in `[0, K)` as the functions take `L`: its position `(3,)` (float64
+        numpy), or `Directional(-direction[k])` for a directional light (the rays travel
+        away from the light, `direction` points toward it)."""
+        k = check_int("k", k, 0, len(self.directional) - 1)
+        if self.directional[k]:
+            return Directional(-np.asarray(self.direction[k], np.float64))
+        return np.asarray(self.position[k], np.float64)
+
     def endpoint(self, P: Float[Array, "*batch 3"], k: int = 0) -> Float[Array, "*batch 3"]:
         """Segment end `L` for receivers `P` `(..., 3)` and light `k` in `[0, K)` (the light
-        itself, or `P + far d`); in `P`'s float dtype (the lights' for integer `P`)."""
+        itself, or `P + far d`: a point light `far` m away standing in for a directional
+        one, not its limit; `source(k)` is the light itself); in `P`'s float dtype (the
+        lights' for integer `P`)."""
         k = check_int("k", k, 0, len(self.directional) - 1)
         P = jnp.asarray(P)
         if P.ndim == 0 or P.shape[-1] != 3:
@@ -300,7 +315,7 @@ def scene_around(surface: SurfaceMesh, *, light=None, floor_depth: float | None 
     With `W` the larger side of the surface's xy bounding box, the floor is the plane
     `floor_depth` (default `W / 4`) below the lowest vertex, under the whole xy extent
     (receivers on an `n_receivers x n_receivers` grid there, normals +z), and the light is
-    `light` (a point `(3,)`), by default at `centre + (0.1 W, -0.075 W)` in xy, `0.75 W`
+    `light` (a point `(3,)`, or a `Directional`: the sun), by default at `centre + (0.1 W, -0.075 W)` in xy, `0.75 W`
     above the highest vertex: the proportions of the built-in pools (4 m wide, floor 1 m
     down, light at (0.4, -0.3, 3) m). The surface's normals must face the light (+z);
     refraction is from above into the medium below, as in every scene.
@@ -315,13 +330,14 @@ def scene_around(surface: SurfaceMesh, *, light=None, floor_depth: float | None 
     centre = 0.5 * (lo[:2] + hi[:2])
     if light is None:
         light = np.array([centre[0] + 0.1 * W, centre[1] - 0.075 * W, hi[2] + 0.75 * W])
-    light = real_array("light", light)
+    kind = "directional" if isinstance(light, Directional) else "point"
+    light = light.toward if kind == "directional" else real_array("light", light)
     if light.shape != (3,) or not np.all(np.isfinite(light)):
-        raise ValueError(f"light must be one finite point (x, y, z), got {light.tolist()}")
+        raise ValueError(f"light must be one finite point (x, y, z) or a Directional, got {light.tolist()}")
     u = (np.arange(n_receivers) + 0.5) / n_receivers
     X, Y = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]), indexing="xy")
     R = np.stack([X.ravel(), Y.ravel(), np.full(X.size, lo[2] - depth)], -1)
-    return _scene(surface, R, np.broadcast_to([0.0, 0.0, 1.0], R.shape), "point", light, False, name)
+    return _scene(surface, R, np.broadcast_to([0.0, 0.0, 1.0], R.shape), kind, light, False, name)
 
 
 def _check_pool(n_triangles, seed, half_size, depth, n_receivers, receiver_jitter, light, light_position,

@@ -136,14 +136,18 @@ def refraction_angle_error(mesh, face, ab, P, L, eta: float) -> np.ndarray:
     """Angle (rad) between `refract(-w_P, -n_s, eta)` and `w_L` at `(face, ab)` (math.md §1, §4).
 
     The check every solver result is judged by. `mesh` is anything `NumpyMesh.from_mesh`
-    reads. Returns `pi` where the refraction is total internal reflection.
+    reads; `L` light positions or a `Directional` (then `w_L` is its direction toward the
+    light, the limit itself). Returns `pi` where the refraction is total internal reflection.
     """
     V, N = NumpyMesh.from_mesh(mesh).triangles(face)
     ab = np.asarray(ab, np.float64)
     M = barycentric_point(V, ab)
     n_s = shading_normal(N, ab)
     w_P = unit(np.asarray(P, np.float64) - M)
-    w_L = unit(np.asarray(L, np.float64) - M)
+    # A directional light (caustics_jax.Directional): w_L is its constant `toward`, the
+    # limit of L at infinity itself (math.md §9), not a far point.
+    toward = getattr(L, "toward", None)
+    w_L = np.broadcast_to(toward, M.shape) if toward is not None else unit(np.asarray(L, np.float64) - M)
     r = refract(-w_P, -n_s, eta)
     tir = np.all(r == 0, -1)
     cos = np.clip(np.sum(unit(np.where(tir[:, None], 1.0, r)) * w_L, -1), -1, 1)
@@ -166,6 +170,16 @@ def refraction_rounding_bound(mesh, face, ab, P, eta: float, dtype) -> np.ndarra
     c = np.sum(unit(np.asarray(P, np.float64) - barycentric_point(V, ab)) * shading_normal(N, ab), -1)
     k = refraction_discriminant(c, eta)
     return eta**2 * float(np.finfo(dtype).eps) / np.sqrt(np.maximum(k, np.finfo(np.float64).tiny))
+
+
+def flat_interface_irradiance_directional(toward, eta: float, E_perp: float = 1.0):
+    """Exact irradiance on a horizontal receiver under a flat horizontal interface lit by a
+    directional light (math.md §9): the parallel beam's irradiance on the surface,
+    `E_perp cos(theta_i)`, times the Fresnel transmittance `T(theta_i)`; below the surface
+    the beam stays parallel, so a horizontal receiver gets the same flux per area.
+    `toward`: unit vector toward the light (`Directional.toward`)."""
+    cos_i = float(np.asarray(toward, np.float64)[2])
+    return E_perp * cos_i * fresnel_transmittance(cos_i, 1 / eta)
 
 
 def flat_interface_irradiance(P, L, z_surface: float, eta: float, intensity: float = 1.0,

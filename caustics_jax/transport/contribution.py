@@ -45,6 +45,7 @@ from ..runtime.lanes import compact_index, scatter_lanes
 from ..solvers import Exhaustive, ExhaustiveSolution, Solution, Trace
 from ..solvers._solve import returns_every_path, solve_local
 from ..surface.features import check as check_features
+from ..surface.lights import Directional, light_points, scene_size
 from ..surface.mesh import SurfaceMesh
 from .differentials import ray_differential_D
 from .visibility import path_visible
@@ -63,8 +64,16 @@ def path_irradiance(
     intensity,
     receiver_normal: Float[Array, "*batch 3"],
     sigma_t=0.0,
+    at_infinity=False,
 ) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """Irradiance at `P` through refraction point `ab`: `eta^2 T A cos(theta_P) I_e / D`.
+
+    Formed as `eta^2 T A cos(theta_P) (I_e / d_L^2) / (D / d_L^2)`
+    (`ray_differential_D(..., normalized=True)`), finite for far lights in float32.
+    `at_infinity` (bool, per lane or one): True where `L` stands for a light at infinity
+    (a directional light's point on the ray, `surface/lights.py`) and `intensity` is its
+    irradiance `E_perp` on a plane perpendicular to the rays (W/m^2), the limit of
+    `I_e / d_L^2`: `E = eta^2 T A cos(theta_P) E_perp / (D / d_L^2)` (math.md §9).
 
     Seed 001 eq. 25 with the factors math.md §6 says it leaves out (module docstring).
     `receiver_normal` is normalised here (any finite length, `unit_vector`). Returns
@@ -82,12 +91,16 @@ def path_irradiance(
     n_P, ok_normal = unit_vector(jnp.asarray(receiver_normal, dtype))
     # traced parameters outside their domain mark the lane invalid (concrete ones are refused)
     ok = ok_normal & in_domain(eta, lo=0, strict=True) & in_domain(intensity, lo=0) & in_domain(sigma_t, lo=0)
-    D, valid = ray_differential_D(V, N, P, L, ab, eta)
+    D_n, valid = ray_differential_D(V, N, P, L, ab, eta, normalized=True)
     T = fresnel_transmittance(dot(w_L, n_s), 1 / eta)
     cos_P = jnp.maximum(-dot(w_P, n_P), 0)
-    A = jnp.exp(-sigma_t * norm(P - barycentric_point(V, ab)))
-    ok = ok & valid & (D > 0)
-    E = eta**2 * T * A * cos_P * intensity / jnp.where(ok, D, 1)
+    M = barycentric_point(V, ab)
+    A = jnp.exp(-sigma_t * norm(P - M))
+    d_L = norm(L - M)
+    # I_e / d_L^2: the irradiance perpendicular to the rays at M (a directional light's E_perp)
+    E_perp = jnp.where(at_infinity, intensity, intensity / jnp.where(d_L > 0, d_L, 1) ** 2)
+    ok = ok & valid & (D_n > 0)
+    E = eta**2 * T * A * cos_P * E_perp / jnp.where(ok, D_n, 1)
     return jnp.where(ok, E, 0), ok
 
 
@@ -140,8 +153,11 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     Args:
         mesh: the refractive surface (normals outward, toward the light).
         P: `(N, 3)` receivers inside the medium.
-        L: `(N, 3)` or `(3,)` light position (for a directional light, a far point).
-        intensity: the light's radiant intensity `I_e` (W/sr), scalar or `(N,)`.
+        L: `(N, 3)` or `(3,)` light position, or a `Directional(direction)` (the sun;
+            surface/lights.py).
+        intensity: the light's radiant intensity `I_e` (W/sr) for a point light; for a
+            `Directional`, its irradiance on a plane perpendicular to the rays (W/m^2).
+            Scalar or `(N,)`.
         eta: `eta_in / eta_out`.
         receiver_normal: `(3,)` or `(N, 3)` receiver normals (normalised here).
         method: the solver (`solve`'s `method`); `**options` go to it.
@@ -186,26 +202,35 @@ def irradiance(mesh: SurfaceMesh | PreparedSurface, P, L, *, intensity, eta: flo
     dtype = prep.dtype
     check_fits("intensity", intensity_np, dtype)
     check_fits("sigma_t", sigma_t, dtype)
-    n = _lane_count(check_points("P", P, dtype), check_points("L", L, dtype))
+    P_np = check_points("P", P, dtype)
+    n = _lane_count(P_np, P_np if isinstance(L, Directional) else check_points("L", L, dtype))
     n_P = check_receiver_normal(receiver_normal, n)
     if intensity_np.ndim > 0 and intensity_np.shape not in ((n,), (1,)):
         raise ValueError(f"intensity must be a scalar or shape ({n},), got {intensity_np.shape}")
+    # A directional light, or a point light beyond the limit distance, is at infinity for
+    # its lanes: their intensity becomes the irradiance perpendicular to the rays
+    # (surface/lights.py, math.md §9).
+    P_lanes = np.broadcast_to(P_np.reshape(-1, 3), (n, 3))
+    placed = light_points(L, P_lanes, scene_size(np.asarray(prep.mesh.vertices), P_lanes), dtype)
+    at_infinity = placed.at_infinity
+    intensity_np = np.where(at_infinity, np.broadcast_to(intensity_np, (n,)) * placed.gain, intensity_np)
+    check_fits("intensity", intensity_np, dtype)
     # Solved and summed in the frame of `prep.local` (a far mesh moved near the origin,
     # `frames.local_origin`); only a returned Solution moves back.
     if all_paths:
         ls = solve_local(prep, P, L, eta=eta, method=method, solutions="all", **options)
         res = cast(ExhaustiveSolution, ls.result)  # every path per receiver
-        E = _sum_all_paths(ls.prep, res, ls.P, ls.L, eta, intensity_np, n_P, sigma_t, visibility)
+        E = _sum_all_paths(ls.prep, res, ls.P, ls.L, eta, intensity_np, n_P, sigma_t, visibility, at_infinity)
         return (E, cast(ExhaustiveSolution, ls.to_global()).solution) if return_solution else E
     feats = prep.features if isinstance(features, str) else features
     ls = solve_local(prep, P, L, eta=eta, method=method, features=feats, **options)
     mesh, sol, P_b, L_b = ls.prep.mesh, cast(Solution, ls.result), ls.P, ls.L
     if feats is not None and feats.compact_lanes:
-        E = _found_lanes_irradiance(mesh, sol, P_b, L_b, eta, intensity_np, n_P, sigma_t)
+        E = _found_lanes_irradiance(mesh, sol, P_b, L_b, eta, intensity_np, n_P, sigma_t, at_infinity)
     else:
         V, N = mesh.triangle(sol.triangle)
         E, _ = path_irradiance(V, N, P_b, L_b, sol.barycentric, eta, jnp.asarray(intensity_np, dtype),
-                               jnp.asarray(n_P, dtype), sigma_t)
+                               jnp.asarray(n_P, dtype), sigma_t, at_infinity=jnp.asarray(at_infinity))
         E = jnp.where(sol.found, E, 0)
     if visibility:
         E = _visible_only(ls.prep, E, sol.found, P_b, sol.point, L_b)
@@ -222,7 +247,7 @@ def _visible_only(prep, E, found, P, M, L):
     return E.at[g[blocked]].set(0) if blocked.any() else E
 
 
-def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
+def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t, at_infinity):
     """`path_irradiance` (D factor included) on the found lanes only, compacted, then
     scattered into zeros: the general path's `where(found, E, 0)` without the work."""
     n, dtype = P.shape[0], mesh.dtype
@@ -233,16 +258,17 @@ def _found_lanes_irradiance(mesh, sol, P, L, eta, intensity, n_P, sigma_t):
     if idx.size == n:  # every lane found: nothing to skip
         V, N = mesh.triangle(sol.triangle)
         return path_irradiance(V, N, P, L, sol.barycentric, eta, jnp.asarray(intensity, dtype),
-                               jnp.asarray(n_P, dtype), sigma_t)[0]
+                               jnp.asarray(n_P, dtype), sigma_t, at_infinity=jnp.asarray(at_infinity))[0]
     g, real = compact_index(idx)
     V, N = mesh.triangle(sol.triangle[g])
     I_e = np.broadcast_to(intensity, (n,))[g]
     E_g, _ = path_irradiance(V, N, P[g], L[g], sol.barycentric[g], eta, jnp.asarray(I_e, dtype),
-                             jnp.asarray(n_P[g], dtype), sigma_t)
+                             jnp.asarray(n_P[g], dtype), sigma_t, at_infinity=jnp.asarray(at_infinity)[g])
     return scatter_lanes(E, g, real, E_g)
 
 
-def _sum_all_paths(prep: PreparedSurface, res, P, L, eta, intensity, n_P, sigma_t, visibility: bool = False):
+def _sum_all_paths(prep: PreparedSurface, res, P, L, eta, intensity, n_P, sigma_t, visibility: bool = False,
+                   at_infinity=False):
     """Sum `path_irradiance` over every solution of an `ExhaustiveSolution` (only the visible
     ones with `visibility`), on the surface it was solved on."""
     mesh = prep.mesh
@@ -256,7 +282,8 @@ def _sum_all_paths(prep: PreparedSurface, res, P, L, eta, intensity, n_P, sigma_
     I_b = jnp.broadcast_to(jnp.asarray(intensity, mesh.dtype).reshape(-1, 1), (n, width))
     # arrays in the mesh's dtype, as in the single-path `irradiance` (a float64 `n_P` under
     # x64 had made a float32 mesh's sum float64; `sigma_t` is a Python float, weakly typed)
-    E, _ = path_irradiance(V, N, P_b, L_b, ab, eta, I_b, jnp.asarray(n_P, mesh.dtype)[:, None, :], sigma_t)
+    E, _ = path_irradiance(V, N, P_b, L_b, ab, eta, I_b, jnp.asarray(n_P, mesh.dtype)[:, None, :], sigma_t,
+                           at_infinity=jnp.asarray(at_infinity).reshape(-1, 1))
     used = np.arange(width)[None] < count[:, None]
     if visibility and used.any():
         lane, k = np.nonzero(used)

@@ -40,6 +40,8 @@ Signs, measured against `autodiff_D` (`tests/transport/test_differentials.py`,
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
@@ -77,7 +79,7 @@ def _triangle_ok(E1, E2, tiny):
 
 
 @float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
-@jax.jit
+@functools.partial(jax.jit, static_argnames=("normalized",))
 def ray_differential_D(
     V: Float[Array, "*batch 3 3"],
     N: Float[Array, "*batch 3 3"],
@@ -85,6 +87,7 @@ def ray_differential_D(
     L: Float[Array, "*batch 3"],
     ab: Float[Array, "*batch 2"],
     eta,
+    normalized: bool = False,
 ) -> tuple[Float[Array, "*batch"], Bool[Array, "*batch"]]:
     """Distance correction factor `D = |L'_perp x L'_par|` by ray differentials (seed 001 eq. 26-33).
 
@@ -100,6 +103,12 @@ def ray_differential_D(
     - eq. 31 (minus sign restored): `w_L' = -eta w_P' + mu' n_s + mu n_s'`;
     - eq. 32: `L' = M' - (M'.w_L) w_L + d_L w_L'`;
     - eq. 33: `D = |L'_perp x L'_par|`.
+
+    `normalized=True` returns `D / d_L^2 = |(L'_perp / d_L) x (L'_par / d_L)|` instead,
+    formed from `L' / d_L = (M' - (M'.w_L) w_L) / d_L + w_L'`: dimensionless, and for a
+    light at infinity its limit `|w_L'_perp x w_L'_par|` (math.md §9). It stays finite for a
+    far light in float32 (a sun 1.5e11 m away: `D` itself, a product of two `d_L`, then
+    squared in the norm, overflows); `path_irradiance` uses it.
 
     Returns `(D, valid)`. `valid` is False, and `D` is 0 (finite, with finite gradients),
     where `M` coincides with `P` or `L` or `n~ = 0`, the triangle is a sliver, `w_P` is
@@ -140,7 +149,10 @@ def ray_differential_D(
     mu = cos_L + eta * cos_P
     mu_d = (eta**2 * cos_P * safe_div(1, cos_L, ok_L) + eta)[..., None] * (dot(W, v(n_s)) + dot(v(w_P), n_s_d))
     w_L_d = -eta[..., None, None] * W + mu_d[..., None] * v(n_s) + s(mu) * n_s_d
-    L_d = M_d - dot(M_d, v(w_L))[..., None] * v(w_L) + s(d_L) * w_L_d
+    if normalized:  # L' / d_L (eq. 32 divided by d_L; math.md §9)
+        L_d = (M_d - dot(M_d, v(w_L))[..., None] * v(w_L)) * s(safe_div(1, d_L, d_L > 0)) + w_L_d
+    else:
+        L_d = M_d - dot(M_d, v(w_L))[..., None] * v(w_L) + s(d_L) * w_L_d
     D = norm(jnp.cross(L_d[..., 0, :], L_d[..., 1, :]))
     # A scene beyond the dtype's range (`arguments.scale_range`; float32 lengths near 1e9:
     # D grows as a product of four lengths) overflows to inf, or to 0 through an overflowed

@@ -46,6 +46,7 @@ from ..runtime.precision import check_mesh_dtype
 from ..solvers import Newton, solve
 from ..solvers._solve import check_lanes
 from ..surface.features import check as check_features
+from ..surface.lights import light_points, scene_size
 from ..surface.mesh import SurfaceMesh
 from .contribution import check_intensity, check_receiver_normal, path_irradiance
 
@@ -102,19 +103,21 @@ def _newton_from(prep: PreparedSurface, P, L, eta, start: StartPoint, newton: Ne
     return found, np.asarray(sol.point, np.float64), np.asarray(face), np.asarray(ab)
 
 
-def _path_irradiance(mesh, face, ab, P, L, eta, intensity, n_P, sigma_t):
+def _path_irradiance(mesh, face, ab, P, L, eta, intensity, n_P, sigma_t, at_infinity):
     V, N = mesh.triangle(jnp.asarray(face))
     E, _ = path_irradiance(V, N, P, L, jnp.asarray(ab, mesh.dtype), eta, jnp.asarray(intensity, mesh.dtype),
-                           jnp.asarray(n_P, mesh.dtype), sigma_t)
+                           jnp.asarray(n_P, mesh.dtype), sigma_t, at_infinity=jnp.asarray(at_infinity))
     return np.asarray(E, np.float64)
 
 
 def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
     """The estimators' arguments, checked as `irradiance` checks them (docs/input_contract.md);
     the surface and the points come back in the frame of `prep.local`, as `irradiance`
-    works (a far mesh moved near the origin, `frames.local_origin`)."""
+    works (a far mesh moved near the origin, `frames.local_origin`); a `Directional` `L`
+    as its points on the receivers' rays (surface/lights.py), `intensity` its `E_perp`."""
     prep = prepare(mesh)
     dtype = prep.dtype
+    L_in = L
     P, L = check_lanes(prep.mesh, P, L, prep.origin)  # (N, 3) each, as `solve` takes them
     n = P.shape[0]
     n_P = check_receiver_normal(receiver_normal, n)
@@ -126,7 +129,13 @@ def _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius):
     check_fits("eta", check_eta(eta), dtype, positive=True)
     check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), dtype)
     check_real("same_radius", same_radius, 0, lo_open=True)
-    return prep.local, P, L, n, n_P, I_e
+    # A light at infinity (directional, or a point beyond the limit distance): its lanes'
+    # intensity becomes the irradiance perpendicular to the rays (surface/lights.py).
+    P_global = np.asarray(P, np.float64) + prep.origin
+    placed = light_points(L_in, P_global, scene_size(np.asarray(prep.mesh.vertices), P_global), dtype)
+    I_e = np.where(placed.at_infinity, I_e * placed.gain, I_e)
+    check_fits("intensity", I_e, dtype)
+    return prep.local, P, L, n, n_P, I_e, placed.at_infinity
 
 
 def _check_count(name, value, lo):
@@ -147,7 +156,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     check_features(features)
     k = _check_count("k", k, 1)
     seed = check_int("seed", seed, 0)
-    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
+    prep, P, L, n, n_P, I_e, at_infinity = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
     lane = np.repeat(np.arange(n), k)
     idx = jnp.asarray(lane)
@@ -158,7 +167,7 @@ def sms_biased(mesh: SurfaceMesh | PreparedSurface, P, L, *, k: int, seed: int, 
     hit = np.nonzero(found)[0]
     if hit.size:
         E_path = _path_irradiance(prep.mesh, face[hit], ab[hit], P[idx[hit]], L[idx[hit]], eta, I_e[lane[hit]],
-                                  n_P[lane[hit]], sigma_t)
+                                  n_P[lane[hit]], sigma_t, at_infinity[lane[hit]])
         owner, pts = lane[hit], M[hit]
         # Distinct per receiver: a solution within same_radius of an earlier one is the same.
         order = np.lexsort((pts[:, 0], owner))
@@ -183,7 +192,7 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
     check_features(features)
     max_trials = _check_count("max_trials", max_trials, 1)
     seed = check_int("seed", seed, 0)
-    prep, P, L, n, n_P, I_e = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
+    prep, P, L, n, n_P, I_e, at_infinity = _inputs(mesh, P, L, intensity, receiver_normal, eta, sigma_t, same_radius)
     rng = np.random.default_rng(seed)
     found, M, face, ab = _newton_from(prep, P, L, eta, surface_starts(prep.mesh, n, rng), newton, features)
     solves = np.ones(n, np.int64)
@@ -192,7 +201,8 @@ def sms_unbiased(mesh: SurfaceMesh | PreparedSurface, P, L, *, seed: int, intens
     hit = np.nonzero(found)[0]
     if hit.size:
         g = jnp.asarray(hit)
-        E_path[hit] = _path_irradiance(prep.mesh, face[hit], ab[hit], P[g], L[g], eta, I_e[hit], n_P[hit], sigma_t)
+        E_path[hit] = _path_irradiance(prep.mesh, face[hit], ab[hit], P[g], L[g], eta, I_e[hit], n_P[hit], sigma_t,
+                                       at_infinity[hit])
     # The trials run in rounds: each active lane draws `m` fresh starts at once (enough to
     # fill one block of `solve`, `blocks.lanes_per_block`), and its outcomes are read in
     # order as the sequential loop would: the first recurrence ends the lane, a miss adds

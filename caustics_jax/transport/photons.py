@@ -9,6 +9,11 @@ with `X` uniform on the rectangle (area `A_e`) the solid-angle density is
 
     Phi = I_e A_e cos_e / (n r_e^2)
 
+A directional light (`Directional`, irradiance `E_perp` perpendicular to its rays) sends
+parallel photons along its `direction` `d` through `X` uniform on the plane: the plane's
+cross-section perpendicular to the rays is `A_e |d_z|`, so each carries
+`Phi = E_perp A_e |d_z| / n`.
+
 It hits the surface exactly (the segment/triangle kernel of `start_points`: grid DDA on
 heightfields, BVH otherwise), refracts at the interpolated normal (GLSL `refract` from
 air, index ratio `1/eta`) carrying the exact Fresnel transmittance `T`, and is
@@ -40,6 +45,7 @@ from ..runtime.arguments import check_eta, check_fits, check_int, check_points, 
 from ..runtime.lanes import power_of_two_bucket
 from ..runtime.precision import check_mesh_dtype
 from ..runtime.progress import progress as progress_bar
+from ..surface.lights import Directional
 from ..surface.mesh import SurfaceMesh
 
 #: Largest `n_photons` of one `photon_irradiance` call: 2^32 photons are hours of tracing on
@@ -134,13 +140,19 @@ class EmissionPlane(NamedTuple):
 
     @classmethod
     def covering(cls, mesh: SurfaceMesh, L) -> EmissionPlane:
-        """The surface's xy bounding box just above its highest vertex; needs `L` above it."""
+        """The surface's xy bounding box just above its highest vertex; needs `L` above it
+        (a `Directional`: travelling down)."""
         V = np.asarray(mesh.vertices, np.float64)
         lo, hi = V.min(0), V.max(0)
         z_e = hi[2] + 1e-3 * max(hi[2] - lo[2], 1e-3 * float(np.max(hi[:2] - lo[:2])))
-        L = np.asarray(L, np.float64).reshape(3)
-        if not L[2] > z_e:
-            raise ValueError(f"L, the light (z = {L[2]}), must be above the surface (max z = {hi[2]})")
+        if isinstance(L, Directional):
+            if not L.direction[2] < 0:
+                raise ValueError(f"the directional light must travel down onto the surface (direction z < 0), "
+                                 f"got direction {L.direction.tolist()}")
+        else:
+            L = np.asarray(L, np.float64).reshape(3)
+            if not L[2] > z_e:
+                raise ValueError(f"L, the light (z = {L[2]}), must be above the surface (max z = {hi[2]})")
         return cls(float(z_e), float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
 
 
@@ -206,20 +218,33 @@ def refract_into_medium(d, n_s, eta):
     return refract(d, n_s, 1 / eta), fresnel_transmittance(cos_i, 1 / eta), ok
 
 
-@functools.partial(jax.jit, static_argnames=("chunk",))
-def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total, count, chunk: int):
+@functools.partial(jax.jit, static_argnames=("chunk", "at_infinity"))
+def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total, count, chunk: int,
+                 at_infinity: bool = False):
     """`chunk` photons, the first `count` of them emitted: their receiver-plane hits
-    `(chunk, 2)`, flux `(chunk,)` and validity (False for the rest)."""
+    `(chunk, 2)`, flux `(chunk,)` and validity (False for the rest). `at_infinity`: `L` is
+    a directional light's `direction` and `intensity` its `E_perp`."""
     dtype = mesh.dtype
     z_e, x0, x1, y0, y1 = plane
     u = jax.random.uniform(key, (chunk, 2), dtype)
     X = jnp.stack([x0 + u[:, 0] * (x1 - x0), y0 + u[:, 1] * (y1 - y0), jnp.full(chunk, z_e)], -1)
-    d_raw = X - L
-    r_e = jnp.linalg.norm(d_raw, axis=-1)
-    d = d_raw / r_e[:, None]
-    # Phi = I_e A_e cos_e / (n r_e^2), cos_e = (L_z - z_e) / r_e (module docstring).
-    flux = intensity * (x1 - x0) * (y1 - y0) * (L[2] - z_e) / (r_e**3 * n_total)
-    face, ab, found = surface_hits(mesh, L, X, bvh=bvh)
+    A_e = (x1 - x0) * (y1 - y0)
+    if at_infinity:
+        # Parallel rays: the plane's cross-section perpendicular to them is A_e |d_z|, so
+        # Phi = E_perp A_e |d_z| / n (module docstring).
+        d = jnp.broadcast_to(L, X.shape)
+        flux = jnp.full(chunk, intensity * A_e * -L[2] / n_total)
+    else:
+        d_raw = X - L
+        r_e = jnp.linalg.norm(d_raw, axis=-1)
+        d = d_raw / r_e[:, None]
+        # Phi = I_e A_e cos_e / (n r_e^2), cos_e = (L_z - z_e) / r_e (module docstring), in
+        # an order that stays finite for a far light in float32 (I_e / r_e^2 first).
+        flux = intensity / r_e**2 * ((L[2] - z_e) / r_e) * (A_e / n_total)
+    # Each ray starts on the emission plane's side of the surface, a plane size back from X
+    # along -d (not at L: a sun 1.5e11 m away resolves its hit to ~1e4 m in float32).
+    origin = X - ((x1 - x0) + (y1 - y0)) * d
+    face, ab, found = surface_hits(mesh, origin, X, bvh=bvh)
     V, N = mesh.triangle(face)
     M = barycentric_point(V, ab)
     r, T, ok = refract_into_medium(d, safe_normalize(interpolated_normal(N, ab)), eta)
@@ -234,12 +259,14 @@ def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total
 def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: float, eta: float = 1.333,
                       receiver: ReceiverGrid, n_photons: int, seed: int = 0,
                       sigma_t: float = 0.0, chunk: int = 1 << 16, progress=None) -> PhotonMap:
-    """Brute-force caustic irradiance on `receiver` from a point light at `L` (module docstring).
+    """Brute-force caustic irradiance on `receiver` from a point light at `L` or a directional
+    light (module docstring).
 
     Args:
         mesh: the refractive surface; the light must be above it.
-        L: `(3,)` light position.
-        intensity: radiant intensity `I_e` (W/sr).
+        L: `(3,)` light position, or a `Directional(direction)` (surface/lights.py).
+        intensity: radiant intensity `I_e` (W/sr); for a `Directional`, the irradiance
+            on a plane perpendicular to its rays (W/m^2).
         eta: `eta_in / eta_out`.
         receiver: the binning grid on the plane `z = receiver.z` (below the surface).
         n_photons: photons emitted through the emission plane (exactly this many).
@@ -266,9 +293,10 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     sigma_t = check_fits("sigma_t", check_real("sigma_t", sigma_t, 0), mesh.dtype)
     if progress is not None and not callable(progress):
         raise ValueError(f"progress must be None or a callable progress(done, total), got {progress!r}")
-    L_np = check_points("L", L, mesh.dtype)
-    if L_np.shape != (3,):
-        raise ValueError(f"L must be one point of shape (3,), got {L_np.shape}")
+    at_infinity = isinstance(L, Directional)
+    L_np = L if at_infinity else check_points("L", L, mesh.dtype)
+    if not at_infinity and L_np.shape != (3,):
+        raise ValueError(f"L must be one point of shape (3,) or a Directional, got {L_np.shape}")
     EmissionPlane.covering(mesh, L_np)  # the light above the surface (the message in the caller's frame)
     if receiver.z >= float(np.min(np.asarray(mesh.vertices)[:, 2])):
         raise ValueError(f"the receiver plane (receiver.z = {receiver.z}) must lie below the surface")
@@ -278,8 +306,9 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     origin = prep.origin
     mesh = prep.local.mesh
     dtype = mesh.dtype
-    L_np = prep.to_local(L_np)
+    L_np = L_np if at_infinity else prep.to_local(L_np)
     plane = EmissionPlane.covering(mesh, L_np)
+    light = L.direction if isinstance(L, Directional) else L_np
     x0, y0 = receiver.x0 - origin[0], receiver.y0 - origin[1]
     bvh = None if mesh.grid is not None else prep.local.bvh  # built once per mesh (`prepare`)
     chunk = min(chunk, power_of_two_bucket(n_photons, 256))
@@ -288,14 +317,15 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     E = np.zeros(receiver.nx * receiver.ny)
     E2 = np.zeros_like(E)
     hits = np.zeros(receiver.nx * receiver.ny, np.int64)
-    args = (jnp.asarray(L_np, dtype), jnp.asarray(tuple(plane), dtype), jnp.asarray(receiver.z - origin[2], dtype),
+    args = (jnp.asarray(light, dtype), jnp.asarray(tuple(plane), dtype), jnp.asarray(receiver.z - origin[2], dtype),
             jnp.asarray(eta, dtype), jnp.asarray(sigma_t, dtype), jnp.asarray(intensity, dtype),
             jnp.asarray(n_photons, dtype))
     with progress_bar(total=n_photons, desc="photons", unit="photon", unit_scale=True) as bar:
         for i in range(n_chunks):
             count = min(chunk, n_photons - i * chunk)
             Y, w, valid = (np.asarray(x) for x in _trace_chunk(
-                mesh, bvh, jax.random.fold_in(key, i), *args, jnp.int32(count), chunk=chunk))
+                mesh, bvh, jax.random.fold_in(key, i), *args, jnp.int32(count), chunk=chunk,
+                at_infinity=at_infinity))
             ix = np.floor((Y[:, 0] - x0) / receiver.dx)
             iy = np.floor((Y[:, 1] - y0) / receiver.dy)
             inside = valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)

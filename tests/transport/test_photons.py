@@ -75,9 +75,9 @@ def test_exactly_n_photons_are_emitted_whatever_the_chunk(n, chunk, calls, trace
 
     sizes, trace_chunk = [], photons._trace_chunk
 
-    def spy(*args, chunk):
+    def spy(*args, chunk, **static):
         sizes.append(chunk)
-        return trace_chunk(*args, chunk=chunk)
+        return trace_chunk(*args, chunk=chunk, **static)
 
     monkeypatch.setattr(photons, "_trace_chunk", spy)
     scene = scenes.flat_pool(512, dtype=jnp.float64)
