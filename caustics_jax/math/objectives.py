@@ -182,11 +182,68 @@ def half_vector_residual(
     `eta_in = eta`); a refracted path has `h` parallel to `n_s`, so both components
     vanish. `h` is the zero vector only for `eta = 1` on the straight line `P -> L`.
     """
-    _, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
+    return _half_vector(V, N, P, L, ab, eta)[0]
+
+
+def _half_vector(V, N, P, L, ab, eta):
+    """The residual `(h . s, h . t)` of `half_vector_residual` and what its Jacobian reuses:
+    `M`, `n_s`, `w_P`, `w_L`, `g = -(w_L + eta w_P)`, `h`, the frame `(s, t)` and `eta`."""
+    M, n_s, w_P, w_L, _ = path_vectors(V, N, P, L, ab)
     eta = jnp.asarray(eta, dtype=w_P.dtype)[..., None]
-    h = safe_normalize(-(w_L + eta * w_P))
+    g = -(w_L + eta * w_P)
+    h = safe_normalize(g)
     s, t = orthonormal_frame(n_s)
-    return jnp.stack([dot(h, s), dot(h, t)], -1)
+    return jnp.stack([dot(h, s), dot(h, t)], -1), (M, n_s, w_P, w_L, g, h, s, t, eta)
+
+
+@float_inputs("V", "N", "P", "L", "ab", params=("eta",), positive=("eta",))
+def half_vector_residual_and_jacobian(
+    V: Float[Array, "*batch 3 3"],
+    N: Float[Array, "*batch 3 3"],
+    P: Float[Array, "*batch 3"],
+    L: Float[Array, "*batch 3"],
+    ab: Float[Array, "*batch 2"],
+    eta,
+) -> tuple[Float[Array, "*batch 2"], Float[Array, "*batch 2 2"]]:
+    """`half_vector_residual` and its Jacobian `d r / d (a, b)` in closed form (math.md §4).
+
+    With `M = V0 + a e1 + b e2` and `n~ = n0 + a (n1 - n0) + b (n2 - n0)`, column `j` (`a`,
+    `b`) follows `dM = e_j` and `dn~ = n_j - n0` through
+
+        dw_P = -(I - w_P w_P^T) dM / d_P,   dw_L = -(I - w_L w_L^T) dM / d_L,
+        dh   = -(I - h h^T) (dw_L + eta dw_P) / |w_L + eta w_P|,
+        dn_s = (I - n_s n_s^T) dn~ / |n~|,
+
+    and the derivative of Duff et al.'s frame (`orthonormal_frame`: with `c = -1 / (sign + z)`,
+    `dc = c^2 dz`, `d(xy c) = c (y dx + x dy) + x y c^2 dz`): `dr = (dh . s + h . ds,
+    dh . t + h . dt)`. What `jax.jacfwd` of the residual computes, without its second
+    pass through every intermediate (the one-step Newton's Jacobian; its test checks it
+    against `jacfwd`). Where a length vanishes (`M` on `P` or `L`, `n~ = 0`, `eta = 1` on
+    the straight line) its column is 0, as the residual's `safe_normalize` is 0 there.
+    """
+    r, (M, n_s, w_P, w_L, g, h, s, t, eta) = _half_vector(V, N, P, L, ab, eta)
+    dtype = w_P.dtype
+    inv = lambda x: jnp.where(x > 0, 1 / jnp.where(x > 0, x, 1), 0)  # noqa: E731
+    inv_g, inv_P, inv_L = inv(norm(g)), inv(norm(P - M)), inv(norm(L - M))
+    inv_n = inv(norm(interpolated_normal(N, ab)))
+    x, y, z = n_s[..., 0], n_s[..., 1], n_s[..., 2]
+    sign = jnp.where(z >= 0, 1, -1).astype(dtype)
+    c = -1 / (sign + z)
+    tangent = lambda v, u: v - dot(u, v)[..., None] * u  # noqa: E731  ((I - u u^T) v)
+    columns = []
+    for dM, dn in ((V[..., 1, :] - V[..., 0, :], N[..., 1, :] - N[..., 0, :]),
+                   (V[..., 2, :] - V[..., 0, :], N[..., 2, :] - N[..., 0, :])):
+        dw_P = -tangent(dM, w_P) * inv_P[..., None]
+        dw_L = -tangent(dM, w_L) * inv_L[..., None]
+        dh = -tangent(dw_L + eta * dw_P, h) * inv_g[..., None]
+        dns = tangent(dn, n_s) * inv_n[..., None]
+        dx, dy, dz = dns[..., 0], dns[..., 1], dns[..., 2]
+        dc = c * c * dz
+        db = c * (y * dx + x * dy) + x * y * dc
+        ds = jnp.stack([sign * (2 * x * c * dx + x * x * dc), sign * db, -sign * dx], -1)
+        dt = jnp.stack([db, 2 * y * c * dy + y * y * dc, -dy], -1)
+        columns.append(jnp.stack([dot(dh, s) + dot(h, ds), dot(dh, t) + dot(h, dt)], -1))
+    return r, jnp.stack(columns, -1)
 
 
 def _spherical_angles(d, n_s):

@@ -24,7 +24,10 @@ step across the mesh (`stepping`):
   are meant for"). The projection walks the adjacency from the current face along the
   step (`_reproject`): the local equivalent of Cycles' scene ray cast, exact whenever
   the ray's hit is reached by crossing edges along the step, as on a heightfield. The
-  2x2 Newton system is solved in closed form (Cramer's rule); `J` comes from `jax.jacfwd`.
+  2x2 Newton system is solved in closed form (Cramer's rule); `J` of the half-vector
+  constraint is the closed form of `objectives.half_vector_residual_and_jacobian` (what
+  `jax.jacfwd` computes, without its second pass through every intermediate), of the
+  angle difference `jax.jacfwd`.
 
 SMS-style multiple starts (`n_starts > 1`): extra starts drawn uniformly in the start
 triangle, from a key folded with the lane's index (so a lane's starts do not depend on
@@ -52,6 +55,7 @@ from ..math.objectives import (
     angle_difference_residual,
     bracket_objective,
     half_vector_residual,
+    half_vector_residual_and_jacobian,
     path_vectors,
 )
 from ..runtime.arguments import MAX_INT32, check_choice, check_int, check_real, check_tol
@@ -263,8 +267,11 @@ def _one_step(mesh, P, L, eta, tol, options: Newton, s: _State) -> _State:
     residual = CONSTRAINTS[options.constraint]
     eps = jnp.finfo(mesh.dtype).eps
     V, N = mesh.triangle(s.face)
-    C = lambda ab: residual(V, N, P, L, ab, eta)  # noqa: E731
-    r, J = C(s.ab), jax.jacfwd(C)(s.ab)
+    if options.constraint == "half_vector":  # the closed-form Jacobian (math.md §4)
+        r, J = half_vector_residual_and_jacobian(V, N, P, L, s.ab, eta)
+    else:
+        C = lambda ab: residual(V, N, P, L, ab, eta)  # noqa: E731
+        r, J = C(s.ab), jax.jacfwd(C)(s.ab)
     det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
     solvable = jnp.isfinite(det) & (det != 0) & jnp.all(jnp.isfinite(r))
     inv = 1 / jnp.where(solvable, det, 1)
