@@ -14,11 +14,14 @@ def test_compare_writes_a_table_json_and_figure_consistent_with_the_reference(tm
     # sweep_n == n: the sweep reuses the main call's compiled shape
     rc = cli.main(["compare", "--n", "64", "--dtype", "float64", "--configs", "walk", "newton-hv",
                    "--ref-n", "24", "--sweep-n", "64", "--repeats", "1", "--triangles", "512",
-                   "--json", str(out_json), "--figure", str(out_png)])
+                   "--json", str(out_json), "--figure", str(out_png), "--frame", "8x8"])
     assert rc == 0
     text = capsys.readouterr().out
     assert "walk / best Newton (newton-hv) throughput ratio" in text
     report = json.loads(out_json.read_text())
+    # the frame (64 receivers: the table's block shape, nothing compiled again), per config
+    assert [(f["config"], f["width"] * f["height"]) for f in report["frames"]] == [("walk", 64), ("newton-hv", 64)]
+    assert all(f["seconds"] > 0 for f in report["frames"]) and "[float64] walk: a 8x8 frame (64 receivers)" in text
     assert {r["config"] for r in report["rows"]} == {"walk", "newton-hv"}
     assert report["reference"]["lanes"] == 24
     for r in report["rows"]:
@@ -46,6 +49,8 @@ def test_compare_writes_a_table_json_and_figure_consistent_with_the_reference(tm
         (dict(configs=("walk", "newton-magic")), "unknown solver configs"),
         (dict(dtypes=("float16",)), "dtypes"),
         (dict(n=0), r"n must be an integer in \[1, "),
+        (dict(frame=(960,)), "frame must be"),
+        (dict(frame=(960, 0)), "frame height"),
     ],
 )
 def test_bad_compare_configuration_raises_value_error(kwargs, match):

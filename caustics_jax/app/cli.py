@@ -63,6 +63,11 @@ def format_table(report: dict) -> str:
     for q in cmp.ratios(report):
         lines.append(f"[{q['dtype']}] walk / best Newton ({q['best_newton']}) throughput ratio: "
                      f"{q['speed_ratio']:.2f}")
+    for fr in report.get("frames", []):
+        first = f"{fr['compile_s']:.1f} s" + (" (loaded from the compilation cache)" if fr["compile_cached"] else "")
+        lines.append(f"[{fr['dtype']}] {fr['config']}: a {fr['width']}x{fr['height']} frame "
+                     f"({fr['width'] * fr['height']:,} receivers) in {fr['seconds'] * 1e3:.0f} ms; "
+                     f"first call's compile {first}")
     return "\n".join(lines)
 
 
@@ -188,7 +193,7 @@ def _compare(args) -> int:
         scene=opts["scene"], n_triangles=opts["triangles"], n=args.n, dtypes=tuple(args.dtype),
         configs=tuple(args.configs), ref_n=args.ref_n, sweep_n=args.sweep_n,
         sweep=not args.no_sweep, repeats=args.repeats, eta=opts["eta"], seed=args.seed, light=opts["light"],
-        floor_depth=opts["floor_depth"])
+        floor_depth=opts["floor_depth"], frame=_frame_arg(args.frame))
     # Everything a user can get wrong is refused here, before the run (minutes), not after it.
     cfg.validate()
     check_output_file("--json", args.json)
@@ -213,6 +218,17 @@ def _compare(args) -> int:
     if not args.json and args.figure in (None, "none"):
         print("no files written (--json PATH and --figure PATH write the results and the Pareto figure)")
     return 0
+
+
+def _frame_arg(value: str) -> tuple[int, int] | None:
+    """`--frame WxH` as `(W, H)`, `none` as None."""
+    if value in (None, "none"):
+        return None
+    try:
+        w, h = (int(x) for x in value.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--frame must be WxH (e.g. 960x720) or 'none', got {value!r}") from None
+    return (w, h)
 
 
 def _cpu_devices_arg(value: str) -> int | str:
@@ -240,7 +256,7 @@ def _add_scene_args(p: argparse.ArgumentParser) -> None:
                         "given here win over it (docs/export.md, 'Your own mesh')")
 
 
-def _add_compare_args(p: argparse.ArgumentParser) -> None:
+def _add_compare_args(p: argparse.ArgumentParser, frame: str = "none") -> None:
     p.add_argument("--scene", default=None, metavar="NAME|PATH",
                    help=f"a named scene ({', '.join(sorted(cmp.SCENES))}) or a mesh file trimesh reads "
                         f"({', '.join(cmp.MESH_SUFFIXES)}): floor and light placed around it as documented "
@@ -260,6 +276,9 @@ def _add_compare_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cpu-devices", default=None, metavar="N|all",
                    help="split the CPU into N JAX devices ('all': one per core, at most 8) so every core runs lanes "
                         "(default: JAX's one CPU device; `make demo` passes 'all')")
+    p.add_argument("--frame", default=frame, metavar="WxH|none",
+                   help="also time one frame of W x H receivers per configuration, seed 001's unit "
+                        "(default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="receiver and reference seed (default: %(default)s)")
     p.add_argument("--json", default=None, help="write the full results as JSON to this path (default: none)")
     p.add_argument("--figure", default=None,
@@ -407,9 +426,9 @@ def main(argv=None) -> int:
     _add_compare_args(sub.add_parser(
         "compare", help="solver comparison: table, optional JSON and Pareto figure"))
     _add_compare_args(sub.add_parser(
-        "demo", help="the main job, the same as `compare` with its defaults (the default wavy pool); `make demo` "
-                     "adds --cpu-devices all --figure figures/solver_comparison.png "
-                     "--json figures/solver_comparison.json"))
+        "demo", help="the main job, the same as `compare` with its defaults (the default wavy pool) and a "
+                     "960x720 frame timed; `make demo` adds --cpu-devices all --figure "
+                     "figures/solver_comparison.png --json figures/solver_comparison.json"), frame="960x720")
     _add_export_args(sub.add_parser(
         "export", help="reference data for shader tests: <kernel>.json + .bin per kernel, <scene>.json + .bin "
                        "per scene, C headers"))

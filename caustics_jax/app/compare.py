@@ -141,6 +141,7 @@ class CompareConfig:
     seed: int = 0
     keep_lanes: bool = False  # per-lane statuses and receivers in the report (floor maps of failures)
     light: tuple[float, float, float] | Directional | None = None  # a point light or the sun replacing the scene's
+    frame: tuple[int, int] | None = None  # (width, height): also time one frame of receivers (seed 001's unit)
     floor_depth: float | None = None  # the receivers' floor, m below the surface (the pools' depth)
 
     def validate(self) -> None:
@@ -166,6 +167,11 @@ class CompareConfig:
                 raise ValueError(f"light must be one finite point (x, y, z), got {self.light!r}")
         if self.floor_depth is not None:
             check_real("floor_depth", self.floor_depth, 0, lo_open=True)
+        if self.frame is not None:
+            if not isinstance(self.frame, tuple | list) or len(self.frame) != 2:
+                raise ValueError(f"frame must be (width, height) in receivers, got {self.frame!r}")
+            check_int("frame width", self.frame[0], 1, 8192)
+            check_int("frame height", self.frame[1], 1, 8192)
         if not is_scene_path(self.scene) and self.scene not in SCENES:
             raise ValueError(f"scene must be one of {sorted(SCENES)} or a mesh file "
                              f"({', '.join(MESH_SUFFIXES)}), got {self.scene!r}")
@@ -362,8 +368,9 @@ def run(cfg: CompareConfig) -> dict:
     with progress(total=len(cfg.dtypes) * len(cfg.configs), desc="compare", unit="config") as bar:
         for dtype in cfg.dtypes:
             _run_dtype(cfg, dtype, sc64, ref_mesh, P, L, ref, results, sweeps, bar)
+    frames = frame_times(cfg, sc64, results)
     report = {
-        "scene": sc64.name, "n": cfg.n, "lanes_crossing_surface": n_cross,
+        "scene": sc64.name, "n": cfg.n, "lanes_crossing_surface": n_cross, "frames": frames,
         "config": {k: v for k, v in dataclasses.asdict(cfg).items()},
         "reference": None if ref is None else {
             "lanes": len(ref["idx"]), "seconds": ref["seconds"],
@@ -374,6 +381,37 @@ def run(cfg: CompareConfig) -> dict:
     if cfg.keep_lanes:
         report["receivers"] = P.tolist()
     return report
+
+
+def frame_times(cfg: CompareConfig, sc64, rows: list[dict]) -> list[dict]:
+    """Seconds to solve one frame of `cfg.frame = (width, height)` receivers (seed 001 §5
+    reports its timings per 960x720 frame): a regular grid on the floor under the
+    surface's xy extent, the scene's light, per configuration and dtype of the table. One
+    untimed call first (the table's runs compiled the programs: blocks of one size), then
+    the median of `repeats + 1` calls; the first call's compile time is the table's
+    `compile`."""
+    if cfg.frame is None:
+        return []
+    width, height = cfg.frame
+    V = np.asarray(sc64.surface.vertices)
+    lo, hi = V[:, :2].min(0), V[:, :2].max(0)
+    depth = float(np.asarray(sc64.receivers)[0, 2])
+    X, Y = np.meshgrid(lo[0] + (np.arange(width) + 0.5) / width * (hi[0] - lo[0]),
+                       lo[1] + (np.arange(height) + 0.5) / height * (hi[1] - lo[1]), indexing="xy")
+    P = np.stack([X.ravel(), Y.ravel(), np.full(X.size, depth)], -1)
+    L = light_points(sc64.lights.source(0), P, scene_size(V, P), np.float32).points
+    out = []
+    for row in rows:
+        method, opts = CONFIGS[row["config"]]
+        with precision(row["dtype"]):
+            mesh = sc64.surface.astype(row["dtype"])
+            Pd, Ld = np.asarray(P, row["dtype"]), np.asarray(L, row["dtype"])
+            _, _, steady, _ = _timed(lambda m=method, o=opts, x=mesh, p=Pd, l_=Ld:  # noqa: E731
+                                     solve(x, p, l_, eta=cfg.eta, method=m, **o), cfg.repeats + 1)
+        out.append({"config": row["config"], "dtype": row["dtype"], "width": width, "height": height,
+                    "seconds": steady, "compile_s": row["compile_s"], "compile_cached": row["compile_cached"]})
+        log(f"[{row['dtype']}] {row['config']}: a {width}x{height} frame in {steady * 1e3:.0f} ms")
+    return out
 
 
 def _rank(row: dict):
