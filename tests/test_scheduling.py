@@ -47,7 +47,27 @@ def test_slot_pool_gives_the_lanes_of_the_chunked_scheduler(solver, dtype):
     pool = solve(mesh, P, L, method=SOLVERS[solver](scheduler="pool"))
     chunked = solve(mesh, P, L, method=SOLVERS[solver](scheduler="chunked"))
     assert np.asarray(pool.found).mean() > 0.99, pool.summary()
-    assert_same_lanes(pool, chunked, FIELDS)
+    if solver != "newton-one-step":
+        assert_same_lanes(pool, chunked, FIELDS)
+        return
+    # A lane whose |f| lies within f's rounding noise of `tol` in either run (the float32
+    # audit's 1e-6 noise floor of f; 1e-14 in float64) is accepted by rounding: one program
+    # stops, the other takes one more step. Measured: 1 lane of 4096 in float32 (closed-form
+    # Jacobian, 2026-12-02) stopped after 2 steps at |f| = 9.98e-6 in one run and after 3 at
+    # 2.2e-7 in the other, points 6.5e-6 m apart; 55 of the 4096 end within the noise of tol
+    # (a step stops at the first |f| <= tol). Such lanes must both be FOUND within the tolerance band:
+    # two points that pass |f| <= tol lie within about 2 tol (d_P + d_L) of each other.
+    tol = Newton().tolerance(jnp.dtype(dtype))
+    noise = 1e-6 if dtype == "float32" else 1e-14
+    at_tol = np.maximum(np.abs(np.asarray(pool.residual)), np.abs(np.asarray(chunked.residual))) > tol - noise
+    assert at_tol.mean() <= 0.05, f"{int(at_tol.sum())} lanes at the tolerance"  # measured 55 of 4096
+    M = np.asarray(pool.point, np.float64)
+    band = 2 * tol * (np.linalg.norm(P - M, axis=-1) + np.linalg.norm(L - M, axis=-1))
+    gap = np.linalg.norm(M - np.asarray(chunked.point, np.float64), axis=-1)
+    assert np.all(np.asarray(pool.found)[at_tol] & np.asarray(chunked.found)[at_tol])
+    assert np.all(gap[at_tol] <= band[at_tol]), (gap[at_tol], band[at_tol])
+    keep = ~at_tol
+    assert_same_lanes(jax.tree.map(lambda x: x[keep], pool), jax.tree.map(lambda x: x[keep], chunked), FIELDS)
 
 
 def test_run_pool_equals_a_per_lane_while_loop():

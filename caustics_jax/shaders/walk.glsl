@@ -8,7 +8,8 @@
 //    reflection first, then towards the smaller |f|. No edge crossing at all: an ellipse in
 //    the triangle (§3.4.4), sampled through the pencil for a sign change.
 // 2. Walk (§3.4.3): cross the exit edge into the neighbour, orient the tangent inward, find
-//    the next crossing, evaluate f at entry and exit; bracket where it changes sign. An arc
+//    the next crossing, evaluate f at the exit (at the entry it is the previous exit's, carried
+//    in the state: one evaluation per point); bracket where it changes sign. An arc
 //    from a transmitting point into TIR (or back) is searched towards the onset of TIR.
 // 3. Refine ("dichotomy"): cut the arc by the conic's normal line through a chord point at
 //    Illinois false position (or the midpoint), or, where that cut leaves the bracket, by the
@@ -30,7 +31,9 @@ struct WalkState {
     int exit_k;
     float exit_t;
     vec2 exit_ab;
-    float f_exit;
+    float f_exit;   // f, its status and its 'line' sign g at the exit: the next face's entry
+    uint st_exit;
+    float g_exit;
     vec2 anchor;
     vec2 tau;
     vec2 perp;   // tau rotated +90 deg, times the bend sense sigma
@@ -97,7 +100,8 @@ Direction cj_direction(float coef[6], float rt[6], uint rv[6], vec2 rab[6], vec2
 
 // The initial state of one of the two walks from M0 (walk._start_states's `build`).
 WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direction dp, Direction dm,
-                   float f0, uint st0, bool singular, float fp, float fm, uint stp, uint stm, uint st_np, uint st_nm,
+                   float f0, uint st0, bool singular, float fp, float fm, uint stp, uint stm, float gp, float gm,
+                   uint st_np, uint st_nm,
                    float fsp, float fsm, bool br_p, bool br_m, bool use_m_bracket, bool is_ellipse, bool ellipse_bracket,
                    vec2 tau_e, vec2 perp_e, float e_phi_lo, float e_phi_hi, float e_f_lo, float e_f_hi, vec2 e_ab_lo,
                    vec2 e_ab_hi, out bool can_flip) {
@@ -127,6 +131,8 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     s.exit_ab = walk_m ? dm.ab : dp.ab;
     s.f_exit = walk_m ? fm : fp;
     uint st_exit = walk_m ? stm : stp;
+    s.st_exit = st_exit;
+    s.g_exit = walk_m ? gm : gp;
 
     uint status = CJ_FOUND;
     int mode = (bracket || search) ? CJ_BISECT : CJ_WALK;
@@ -239,11 +245,12 @@ void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta
     }
 
     bool walk_m = dm.ok && (!dp.ok || prefer_m);
-    state = cj_build(walk_m, face, ab0, found, tol, dp, dm, f0, st0, singular, fp, fm, stp, stm, st_np, st_nm,
+    state = cj_build(walk_m, face, ab0, found, tol, dp, dm, f0, st0, singular, fp, fm, stp, stm, gp, gm, st_np, st_nm,
                      fsp, fsm, br_p, br_m, use_m_bracket, is_ellipse, ellipse_bracket, tau_e, perp_e, e_phi_lo,
                      e_phi_hi, e_f_lo, e_f_hi, e_ab_lo, e_ab_hi, can_flip);
     bool unused;
-    other = cj_build(!walk_m, face, ab0, found, tol, dp, dm, f0, st0, singular, fp, fm, stp, stm, st_np, st_nm,
+    other = cj_build(!walk_m, face, ab0, found, tol, dp, dm, f0, st0, singular, fp, fm, stp, stm, gp, gm, st_np,
+                     st_nm,
                      fsp, fsm, br_p, br_m, use_m_bracket, is_ellipse, ellipse_bracket, tau_e, perp_e, e_phi_lo,
                      e_phi_hi, e_f_lo, e_f_hi, e_ab_lo, e_ab_hi, unused);
 }
@@ -278,9 +285,10 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     vec2 ab;
     bool ok = cj_next_crossing(rt, rv, rab, e, tau, perp, k_in, t_in, k, tt, ab, phi);
 
-    float f_e, fx, g_e, gx;
-    uint st_e, stx;
-    cj_objective(fr, P, L, e, eta, f_e, st_e, g_e);
+    // At the entry, f is the previous exit's (the same curve point: the two faces' normals
+    // agree on their shared edge); only the exit is evaluated (walk._walk_update).
+    float f_e = s.f_exit, g_e = s.g_exit, fx, gx;
+    uint st_e = s.st_exit, stx;
     cj_objective(fr, P, L, ab, eta, fx, stx, gx);
     bool e_ok = st_e == CJ_OK, x_ok = stx == CJ_OK;
     bool found_e = e_ok && abs(f_e) <= tol;
@@ -307,6 +315,8 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     s.exit_t = tt;
     s.exit_ab = ab;
     s.f_exit = fx;
+    s.st_exit = stx;
+    s.g_exit = gx;
     s.anchor = e;
     s.tau = tau;
     s.perp = perp;

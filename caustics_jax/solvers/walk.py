@@ -115,7 +115,9 @@ class _State(NamedTuple):
     exit_k: jax.Array
     exit_t: jax.Array
     exit_ab: jax.Array
-    f_exit: jax.Array
+    f_exit: jax.Array  # f, its status and its "line" sign g at the exit: the next face's entry
+    st_exit: jax.Array
+    g_exit: jax.Array
     anchor: jax.Array
     tau: jax.Array
     perp: jax.Array  # tau rotated +90 deg, times the bend sense sigma
@@ -173,7 +175,9 @@ class _Start(NamedTuple):
     k: jax.Array  # exit edges
     t: jax.Array  # exit edge parameters
     ab: jax.Array  # exits
-    f: jax.Array  # f at the exits
+    f: jax.Array  # f at the exits, their status and "line" sign (the next face's entry values)
+    st: jax.Array
+    g: jax.Array
     phi: jax.Array  # pencil angles of the exits
     phi_near: jax.Array  # pencil angles of the near points
     f_near: jax.Array
@@ -263,8 +267,9 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
     ellipse = _Ellipse(coef, tau_e, perp_e, jnp.stack([nearp, nearm]), phisp, jnp.stack([fsp, fsm]),
                        jnp.stack([gsp, gsm]), st_all[3:5])
     _, k, t, ab, phi, tau, perp, phi_s, near, _ = dirs
-    return _Start(_pack_flags(flags), face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]), phi, phi_s,
-                  jnp.stack([fsp, fsm]), near, tau, perp, ellipse)
+    return _Start(_pack_flags(flags), face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]),
+                  jnp.stack([stp, stm]), jnp.stack([gp, gm]), phi, phi_s, jnp.stack([fsp, fsm]), near, tau, perp,
+                  ellipse)
 
 
 #: The booleans of `_Start.flags`, bit i = name i.
@@ -344,7 +349,7 @@ def _start_states(start: _Start):
         return can_flip, _State(
             mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=start.face,
             exit_k=pm(start.k, pick_m), exit_t=pm(start.t, pick_m), exit_ab=pm(start.ab, pick_m),
-            f_exit=pm(start.f, pick_m),
+            f_exit=pm(start.f, pick_m), st_exit=pm(start.st, pick_m), g_exit=pm(start.g, pick_m),
             anchor=start.ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
             ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32),
             tir_end=jnp.where(searching, jnp.where(tir_arc, 2, -1), 0).astype(jnp.int32),
@@ -396,11 +401,16 @@ def _walk_geometry(mesh, coef, g, k_in, t_in, e):
     return arc_from_point(coef, e, inward(k_in, coef.dtype), k_in, t_in)
 
 
-def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
-    """Cross into `g`; bracket if f changes sign on its arc, else schedule the next crossing."""
+def _walk_update(s: _State, g, e, geometry, fx, stx, gx, tol) -> _State:
+    """Cross into `g`; bracket if f changes sign on its arc, else schedule the next crossing.
+
+    `fx, stx, gx`: `bracket_objective` at the new exit. At the entry `e` they are the
+    previous exit's (`s.f_exit`, ...): the same point of the curve, where the interpolated
+    normals of the two faces agree (a shared edge interpolates its two vertex normals), so
+    `f` is computed once per point of the walk."""
     side, tau, perp, ok, k, tt, ab, phi = geometry
     left = g < 0
-    f_e, fx, st_e, stx = f2[0], f2[1], st2[0], st2[1]
+    f_e, st_e, g_e = s.f_exit, s.st_exit, s.g_exit
     e_ok, x_ok = st_e == ObjectiveStatus.OK, stx == ObjectiveStatus.OK
     found_e = e_ok & (jnp.abs(f_e) <= tol)
     found_x = ok & x_ok & (jnp.abs(fx) <= tol)
@@ -409,7 +419,7 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     # point of the line PL, so there a sign change of `f` alone brackets (`f` is continuous
     # through `M0`, `signed_sine_and_status`).
     from_m0 = s.phi_hi == 0
-    bracket = ok & e_ok & x_ok & (root_between((f_e, g2[0]), (fx, g2[1])) | (from_m0 & opposite(f_e, fx)))
+    bracket = ok & e_ok & x_ok & (root_between((f_e, g_e), (fx, gx)) | (from_m0 & opposite(f_e, fx)))
     lost = ~ok | (side == 0)
     # An arc from a transmitting point to a totally reflecting one (or back) may hold a
     # root between the transmitting end and the onset of TIR, where neither end shows a
@@ -437,7 +447,8 @@ def _walk_update(s: _State, g, e, geometry, f2, st2, g2, tol) -> _State:
     best_f = jnp.where(left, s.f_exit, best_f)
     return s._replace(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32), face=face,
-        exit_k=k, exit_t=tt, exit_ab=ab, f_exit=fx, anchor=e, tau=tau, perp=perp,
+        exit_k=k, exit_t=tt, exit_ab=ab, f_exit=fx, st_exit=stx.astype(jnp.int32), g_exit=gx, anchor=e,
+        tau=tau, perp=perp,
         phi_lo=jnp.zeros_like(phi), phi_hi=phi, f_lo=f_e, f_hi=fx, ab_lo=e, ab_hi=ab,
         side=jnp.zeros_like(s.side), tir_end=tir_end.astype(jnp.int32),
         best_ab=best_ab, best_f=best_f, steps=s.steps + 1, crossed=s.crossed + jnp.where(left, 0, 1),
@@ -542,18 +553,16 @@ def _step(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     """One iteration: a triangle crossing (WALK) or a refinement cut (BISECT).
 
     Under `vmap` both branches run for every lane, so they share one triangle gather,
-    one conic and one batched evaluation of `f` (two points) instead of two of each.
+    one conic and one evaluation of `f` (the new exit, or the cut) instead of two of each.
     """
     walking = s.mode == WALK
     g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
     V, N, coef = _frame(mesh, jnp.where(walking, g, s.face), P, L)
     walk_geo = _walk_geometry(mesh, coef, g, k_in, t_in, e)
     p, phi, ok = _bisect_geometry(coef, s, illinois)
-    ab_x = walk_geo[6]
-    pts = jnp.where(walking, jnp.stack([e, ab_x]), jnp.stack([p, p]))
-    f2, st2, g2 = bracket_objective(V, N, P, L, pts, eta)
-    walked = _walk_update(s, g, e, walk_geo, f2, st2, g2, tol)
-    refined = _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
+    f1, st1, g1 = bracket_objective(V, N, P, L, jnp.where(walking, walk_geo[6], p)[None], eta)
+    walked = _walk_update(s, g, e, walk_geo, f1[0], st1[0], g1[0], tol)
+    refined = _bisect_update(s, p, phi, ok, f1[0], st1[0], tol, illinois)
     return jax.tree.map(lambda w, b: jnp.where(walking, w, b), walked, refined)
 
 
@@ -575,16 +584,16 @@ def _walk_branch(mesh, P, L, eta, tol, s: _State) -> _State:
     g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
     V, N, coef = _frame(mesh, g, P, L)
     walk_geo = _walk_geometry(mesh, coef, g, k_in, t_in, e)
-    f2, st2, g2 = bracket_objective(V, N, P, L, jnp.stack([e, walk_geo[6]]), eta)
-    return _walk_update(s, g, e, walk_geo, f2, st2, g2, tol)
+    f1, st1, g1 = bracket_objective(V, N, P, L, walk_geo[6][None], eta)
+    return _walk_update(s, g, e, walk_geo, f1[0], st1[0], g1[0], tol)
 
 
 def _bisect_branch(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     """`_step` for a lane in BISECT mode: only the refinement cut is computed."""
     V, N, coef = _frame(mesh, s.face, P, L)
     p, phi, ok = _bisect_geometry(coef, s, illinois)
-    f2, st2, _ = bracket_objective(V, N, P, L, jnp.stack([p, p]), eta)
-    return _bisect_update(s, p, phi, ok, f2[0], st2[0], tol, illinois)
+    f1, st1, _ = bracket_objective(V, N, P, L, p[None], eta)
+    return _bisect_update(s, p, phi, ok, f1[0], st1[0], tol, illinois)
 
 
 def walk_init(mesh: SurfaceMesh, P, L, face, ab0, found, eta, tol, options: Walk):
