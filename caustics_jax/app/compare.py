@@ -383,13 +383,19 @@ def run(cfg: CompareConfig) -> dict:
     return report
 
 
+#: The configurations `frame_times` times: the walk against the strongest baseline.
+FRAME_CONFIGS = ("walk", "newton-hv-step")
+
+
 def frame_times(cfg: CompareConfig, sc64, rows: list[dict]) -> list[dict]:
     """Seconds to solve one frame of `cfg.frame = (width, height)` receivers (seed 001 §5
     reports its timings per 960x720 frame): a regular grid on the floor under the
-    surface's xy extent, the scene's light, per configuration and dtype of the table. One
-    untimed call first (the table's runs compiled the programs: blocks of one size), then
-    the median of `repeats + 1` calls; the first call's compile time is the table's
-    `compile`."""
+    surface's xy extent, the scene's light. Only the race a port decides (`FRAME_CONFIGS`,
+    the walk and the strongest Newton) and only in float32, what shaders run (else the
+    table's first dtype): the optimistix Newtons take 10-30 s per frame, which had made
+    `make demo` take 11 min instead of about 3. One untimed call first (the table's runs
+    compiled the programs: blocks of one size), then one timed; the first call's compile
+    time is the table's `compile`."""
     if cfg.frame is None:
         return []
     width, height = cfg.frame
@@ -400,14 +406,17 @@ def frame_times(cfg: CompareConfig, sc64, rows: list[dict]) -> list[dict]:
                        lo[1] + (np.arange(height) + 0.5) / height * (hi[1] - lo[1]), indexing="xy")
     P = np.stack([X.ravel(), Y.ravel(), np.full(X.size, depth)], -1)
     L = light_points(sc64.lights.source(0), P, scene_size(V, P), np.float32).points
+    dtype = "float32" if "float32" in cfg.dtypes else cfg.dtypes[0]
     out = []
     for row in rows:
+        if row["config"] not in FRAME_CONFIGS or row["dtype"] != dtype:
+            continue
         method, opts = CONFIGS[row["config"]]
         with precision(row["dtype"]):
             mesh = sc64.surface.astype(row["dtype"])
             Pd, Ld = np.asarray(P, row["dtype"]), np.asarray(L, row["dtype"])
             _, _, steady, _ = _timed(lambda m=method, o=opts, x=mesh, p=Pd, l_=Ld:  # noqa: E731
-                                     solve(x, p, l_, eta=cfg.eta, method=m, **o), cfg.repeats + 1)
+                                     solve(x, p, l_, eta=cfg.eta, method=m, **o), 1)
         out.append({"config": row["config"], "dtype": row["dtype"], "width": width, "height": height,
                     "seconds": steady, "compile_s": row["compile_s"], "compile_cached": row["compile_cached"]})
         log(f"[{row['dtype']}] {row['config']}: a {width}x{height} frame in {steady * 1e3:.0f} ms")
