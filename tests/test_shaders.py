@@ -128,9 +128,12 @@ def test_glsl_walk_conforms_on_every_scene(scenes, scene):
     # the shared edge runs the other way in the neighbour: forgetting it
     ("common.glsl", "cj_edge_param_from_vertex_order(max(k_next, 0), 1.0 - s);",
      "cj_edge_param_from_vertex_order(max(k_next, 0), s);"),
-    # a sign: the tangent oriented outward at the entry point
-    ("walk.glsl", "cj_orientation(fr.coef, e, side < 0.0 ? -t : t, tau, perp);",
-     "cj_orientation(fr.coef, e, side > 0.0 ? -t : t, tau, perp);"),
+    # a sign: the f carried to the next face's entry negated (every bracket test there
+    # reads it). The tangent oriented outward at an entry point, the sign this case had
+    # flipped, is seen by no lane of these scenes since a chord cut no longer stalls in phi
+    # (walk._bisect_update): the exit is the arc's one other edge root either way, and the
+    # chord cuts do not read the pencil frame; neither is a second direction along +t0.
+    ("walk.glsl", "s.f_exit = fx;", "s.f_exit = -fx;"),
     # the bracket end the cut replaces
     ("walk.glsl", "bool to_hi = cj_opposite(fm, s.f_lo);", "bool to_hi = cj_opposite(fm, s.f_hi);"),
     # the grid's cell index transposed

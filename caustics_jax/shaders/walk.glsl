@@ -391,10 +391,12 @@ WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool
     }
     bool found = ok && transmits && abs(fm) <= tol;
     // The pencil angle only measures a curved arc; on a straight one (phi = 0 to rounding)
-    // the bracket is judged by its end points alone.
+    // the bracket is judged by its end points alone. After a chord cut phi is only derived
+    // from the point (its rounding exceeds the threshold on nearly straight arcs): only a
+    // pencil cut stalls in phi (walk._bisect_update).
     bool curved = max(abs(phi_lo), abs(phi_hi)) > CJ_SQRT_EPS;
     bool stalled = cj_norm2(ab_hi - ab_lo) <= 4.0 * CJ_EPS * max(cj_norm2(ab_hi), 1.0)
-                   || (curved && abs(phi_hi - phi_lo) <= 4.0 * CJ_EPS * max(abs(phi_hi), 1e-30));
+                   || (curved && !ok_chord && abs(phi_hi - phi_lo) <= 4.0 * CJ_EPS * max(abs(phi_hi), 1e-30));
     int mode = (found || stalled || !ok) ? CJ_DONE : CJ_BISECT;
     uint status = found ? CJ_FOUND : ((stalled || !ok) ? CJ_NOT_CONVERGED : s.status);
     // A TIR search that closed in on the onset without a sign change found no root: a walk
