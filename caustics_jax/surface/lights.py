@@ -105,8 +105,9 @@ def light_points(L, P: np.ndarray, size: float, dtype) -> PlacedLights:
     directional light, and a point light farther from `P` than `R = limit_distance(size,
     dtype)`, become the point at distance `R` on the ray from `P` toward the light: every
     formula's value then equals its limit to within rounding (module docstring), and the
-    solvers' products of lengths stay inside the dtype's range (a sun 1.5e11 m away from a
-    10 km scene had overflowed float32's conic products)."""
+    solvers' products of lengths stay inside the dtype's range (a light 1e18 m away from a
+    10 km pool had overflowed float32's conic products: 90% of its lanes kept their status,
+    against all at 2.5e12 m)."""
     P = np.asarray(P, np.float64).reshape(-1, 3)
     R = limit_distance(max(size, np.finfo(np.float64).tiny), dtype)
     if isinstance(L, Directional):
