@@ -328,19 +328,20 @@ void cj_ray_differential_D(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float 
 // T = 1 - R the Fresnel transmittance from the light's side (cos = w_L . n_s, ratio 1/eta),
 // A = exp(-sigma_t |P - M|), cos(theta_P) = max(-w_P . n_P, 0). E = 0 where D is invalid.
 // Formed as (I_e / d_L^2) / (D / d_L^2), finite for far lights (a directional light's lanes
-// carry its point at the limit distance, math.md §9); D = (D / d_L^2) d_L^2 comes back.
+// carry its point at the limit distance, math.md §9). valid = 0 where D is invalid.
 float cj_path_irradiance(vec3 V[3], vec3 N[3], vec3 P, vec3 L, vec2 ab, float eta, float intensity,
-                         vec3 receiver_normal, float sigma_t, out float D, out uint D_valid) {
+                         vec3 receiver_normal, float sigma_t, out uint valid) {
     vec3 M, n_s, w_P, w_L;
     cj_path_vectors(V, N, P, L, ab, M, n_s, w_P, w_L);
     float D_n;
+    uint D_valid;
     cj_ray_differential(V, N, P, L, ab, eta, true, D_n, D_valid);
     float d_L = cj_norm(L - M);
-    D = D_n * d_L * d_L;
     float T = 1.0 - cj_fresnel_reflectance(dot(w_L, n_s), 1.0 / eta);
     float cos_P = max(-dot(w_P, cj_safe_normalize(receiver_normal)), 0.0);
     float A = exp(-sigma_t * cj_norm(P - M));
     bool ok = D_valid != 0u && D_n > 0.0;
+    valid = ok ? 1u : 0u;
     float E_perp = intensity / (d_L > 0.0 ? d_L * d_L : 1.0);
     return ok ? eta * eta * T * A * cos_P * E_perp / D_n : 0.0;
 }

@@ -32,9 +32,11 @@ void cj_run(inout Lane r) {
     if (found) cj_signed_sine(V, N, r.P, r.L, r.ab, r.eta, f, st);
     r.residual = f;
     float D = 0.0, E = 0.0;
-    uint D_valid = 0u;
-    if (s.status == CJ_FOUND)
-        E = cj_path_irradiance(V, N, r.P, r.L, r.ab, r.eta, r.intensity, r.receiver_normal, r.sigma_t, D, D_valid);
+    uint D_valid = 0u, E_valid;
+    if (s.status == CJ_FOUND) {  // D as the testbed reports it (ray_differential_D), E from D / d_L^2
+        cj_ray_differential_D(V, N, r.P, r.L, r.ab, r.eta, D, D_valid);
+        E = cj_path_irradiance(V, N, r.P, r.L, r.ab, r.eta, r.intensity, r.receiver_normal, r.sigma_t, E_valid);
+    }
     r.D = D;
     r.D_valid = D_valid;
     r.E = E;
