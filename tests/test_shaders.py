@@ -21,8 +21,8 @@ from caustics_jax.shaders import vulkan as vk
 SCENE_LANES = 256
 
 # The line of edge_intersections.glsl for edge a = 0 and its misprint in seed 001 eq. 22.
-CORRECT_EDGE_LINE = "quad[2] = vec3(B, E, F);"
-MISPRINTED_EDGE_LINE = "quad[2] = vec3(B, D, F);"
+CORRECT_EDGE_LINE = "return vec3(B, E, F);"
+MISPRINTED_EDGE_LINE = "return vec3(B, D, F);"
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_misprinted_edge_quadratic_fails_conformance(device, tmp_path):
     data, work, host = device
     shaders = tmp_path / "shaders"
     shutil.copytree(conf.SHADER_DIR, shaders, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
-    path = shaders / "common.glsl"  # cj_edge_intersections, shared by the kernel and the walk
+    path = shaders / "common.glsl"  # cj_edge_quadratic, shared by the kernel and the walk
     text = path.read_text()
     assert text.count(CORRECT_EDGE_LINE) == 1
     path.write_text(text.replace(CORRECT_EDGE_LINE, MISPRINTED_EDGE_LINE))

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..math.barycentric import barycentric_point
+from ..math.barycentric import barycentric_point, edge_barycentric
 from ..math.conic import (
     conic_centre,
     conic_coefficients,
@@ -35,6 +35,8 @@ from ..math.conic import (
     conic_value,
     edge_intersection_points,
     edge_intersections,
+    edge_quadratic_roots,
+    edge_quadratics,
     solve_quadratic,
 )
 
@@ -97,22 +99,108 @@ def next_crossing(roots, e, tau, perp, entry_edge=-1, entry_t=0.0):
     allowed = valid & ~(nearest & (gap < 8 * np.sqrt(eps)))
     cand = allowed & (dist > 8 * eps * scale)
     cand = jnp.where(jnp.any(cand), cand, allowed)
-    along, across = v @ tau, v @ perp
-    phi = jnp.arctan2(across, along)
-    phi = jnp.where(phi < 0, phi + jnp.pi, phi)  # the cutting line's angle, in [0, pi)
-    # On the tangent line itself (a straight curve: constant normals, a flat surface) the
-    # line angle is 0 or pi only up to rounding; there, ahead comes first (nearest first)
-    # and behind comes last. The same holds for a root close to `e` on a gentle curve:
-    # its true `across` (curvature x dist^2 / 2) is below the absolute rounding of the
-    # barycentrics (`e` and the root are each off the conic by ~eps |ab|), so the sign of
-    # `across` is noise while the sign of `along` is not. Without the absolute bound a
-    # float32 root 1e-4 behind `e` read as "ahead at angle 1e-3" (arctan2(-0, -1) wraps
-    # to 0), and the walk went the wrong way in both directions.
-    on_tangent = on_tangent_line(across, dist, scale)
-    phi = jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
+    phi = pencil_angle(v, tau, perp, dist, scale)
     phi = jnp.where(cand, phi, jnp.inf).reshape(-1)
     i = jnp.argmin(phi)
     return jnp.isfinite(phi[i]), (i // 2).astype(jnp.int32), t.reshape(-1)[i], ab.reshape(-1, 2)[i], phi[i]
+
+
+def pencil_angle(v, tau, perp, dist, scale):
+    """The pencil angle in `[0, pi)` of a curve point `e + v` seen from the curve point `e`
+    in the frame `(tau, perp)` of `orientation` (`next_crossing`'s order along the curve);
+    `dist = |v|`, `scale` the magnitude of both points' barycentrics.
+
+    On the tangent line itself (a straight curve: constant normals, a flat surface) the
+    line angle is 0 or pi only up to rounding; there, ahead comes first (nearest first)
+    and behind comes last. The same holds for a root close to `e` on a gentle curve:
+    its true `across` (curvature x dist^2 / 2) is below the absolute rounding of the
+    barycentrics (`e` and the root are each off the conic by ~eps |ab|), so the sign of
+    `across` is noise while the sign of `along` is not. Without the absolute bound a
+    float32 root 1e-4 behind `e` read as "ahead at angle 1e-3" (arctan2(-0, -1) wraps
+    to 0), and the walk went the wrong way in both directions.
+    """
+    eps = float(np.finfo(v.dtype).eps)
+    along, across = v @ tau, v @ perp
+    phi = jnp.arctan2(across, along)
+    phi = jnp.where(phi < 0, phi + jnp.pi, phi)  # the cutting line's angle, in [0, pi)
+    on_tangent = on_tangent_line(across, dist, scale)
+    return jnp.where(on_tangent, jnp.where(along > 0, eps * dist, jnp.pi), phi)
+
+
+#: Vertex values of the conic within this many eps of its largest coefficient read as
+#: zero in `sign_test_exit` (the curve passes near that vertex): the lane takes the exact
+#: construction. Edge quadratics' coefficients are sums of up to five conic coefficients,
+#: so a root within `edge_intersections`' 64 eps slack of a vertex gives a vertex value
+#: below 5 x 64 eps of the largest one; 1024 leaves room for their rounding.
+VERTEX_ZERO = 1024
+
+
+class BoundaryCrossings(NamedTuple):
+    """`boundary_crossings`' answer: `clear` (the signs decide: the conic meets the face's
+    boundary exactly twice), the two crossings' `edge` `(2,)`, edge roots `t` `(2,)` and
+    points `ab` `(2, 2)`."""
+
+    clear: jax.Array
+    edge: jax.Array
+    t: jax.Array
+    ab: jax.Array
+
+
+def boundary_crossings(coef) -> BoundaryCrossings:
+    """The two points where the conic crosses the face's boundary, from the signs of the
+    conic at the three vertices and two edge quadratics (the lean exit of the walk, seed
+    001 §3.4.3, without `next_crossing`'s pencil order over six roots).
+
+    The conic's values at `V0, V1, V2` are `F`, `A + D + F`, `B + E + F` (eq. 12 at
+    `(a, b) = (0, 0), (1, 0), (0, 1)`). With all three clearly non-zero and not all of one
+    sign, exactly two edges have end points of different signs, and each holds exactly
+    one root of its quadratic (eq. 22-24, corrected); the third edge's ends agree and it
+    holds none or two. When it holds none (its quadratic's extremum lies off the edge, or
+    on the end points' side of zero), the conic meets the boundary exactly twice and the
+    curve inside the face is one arc between those two roots. `clear` is False otherwise:
+    a vertex value within `VERTEX_ZERO` eps of the largest coefficient (the curve near a
+    vertex), all vertices of one sign (no crossing, an ellipse inside, or pairs of roots:
+    the re-entry of Fig. 5c), a pair of roots on the third edge, a root count other than
+    one on a crossing edge. The roots are `edge_quadratic_roots` of those edges: where
+    clear, bit for bit `edge_roots`' own.
+    """
+    A, B, C, D, E, F = coef
+    dtype = coef.dtype
+    eps = float(np.finfo(dtype).eps)
+    zero = VERTEX_ZERO * eps * jnp.max(jnp.abs(coef))
+    values = jnp.stack([F, A + D + F, B + E + F])  # V0, V1, V2
+    nonzero = jnp.all(jnp.abs(values) > zero)
+    pos = values > 0
+    differs = jnp.stack([pos[0] != pos[1], pos[1] != pos[2], pos[0] != pos[2]])  # edges 0, 1, 2
+    third = jnp.argmin(differs)  # the edge whose ends agree (the only one, where clear)
+    edges = jnp.stack([(third + 1) % 3, (third + 2) % 3]).astype(jnp.int32)
+    quad = edge_quadratics(coef)
+    q2, q1, q0 = quad[third]
+    # The third edge's quadratic at its extremum `t* = -q1 / 2 q2`: a pair of roots on the
+    # edge needs `t*` on it and `q(t*)` of the other sign than its end points' (or zero).
+    t_star = -q1 / jnp.where(q2 != 0, 2 * q2, 1)
+    extremum = q0 + q1 * t_star / 2
+    pair = (q2 != 0) & (t_star > 0) & (t_star < 1) & (extremum * jnp.sign(q0) <= zero)
+    roots, valid = edge_quadratic_roots(*jnp.moveaxis(quad[edges], -1, 0))
+    one = valid[:, 0] != valid[:, 1]
+    t = jnp.where(valid[:, 0], roots[:, 0], roots[:, 1])
+    clear = nonzero & jnp.any(differs) & ~pair & jnp.all(one)
+    return BoundaryCrossings(clear, edges, t, edge_barycentric(edges, t))
+
+
+def sign_test_exit(coef, entry_edge, entry_t):
+    """The exit of the arc that entered the face through `entry_edge` at `entry_t`:
+    `(clear, edge, t, ab)` (`boundary_crossings`: of the two crossings, the one that is
+    not the entry). `clear` also needs the entry edge to be one of the two and its root
+    within `next_crossing`'s `8 sqrt(eps)` of `entry_t` (the entry point, recomputed in
+    this face's conic), so that where clear `next_crossing` returns the same exit."""
+    bc = boundary_crossings(coef)
+    eps = float(np.finfo(coef.dtype).eps)
+    entry_is_a = bc.edge[0] == entry_edge
+    entry = jnp.where(entry_is_a, 0, 1)
+    is_entry = (bc.edge[entry] == entry_edge) & (jnp.abs(bc.t[entry] - entry_t) < 8 * np.sqrt(eps))
+    x = 1 - entry
+    return bc.clear & is_entry, bc.edge[x], bc.t[x], bc.ab[x]
 
 
 def inward(edge, dtype):

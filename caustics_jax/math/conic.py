@@ -215,12 +215,21 @@ def edge_intersections(coef: Float[Array, "*batch 6"], tol: float | None = None)
     is a `ValueError`; inside jit it is clipped into that range (NaN: the default).
     """
     quad = edge_quadratics(coef)
-    t, valid = solve_quadratic(quad[..., 0], quad[..., 1], quad[..., 2])
     default = 64 * jnp.finfo(coef.dtype).eps
     if tol is None:
         tol = default
     else:
         tol = jnp.where(jnp.isnan(tol), default, jnp.clip(tol, 0, EDGE_TOL_MAX))
+    return edge_quadratic_roots(quad[..., 0], quad[..., 1], quad[..., 2], tol)
+
+
+def edge_quadratic_roots(q2, q1, q0, tol=None):
+    """`edge_intersections` for one edge's quadratic `(q2, q1, q0)` (`edge_quadratics`):
+    its roots in `[-tol, 1 + tol]` clamped to `[0, 1]`, ascending, and which are valid
+    (`tol` already checked; None: `64 eps`). The walk's sign-test exit
+    (`arcs.sign_test_exit`) solves the exit edge alone with it."""
+    t, valid = solve_quadratic(q2, q1, q0)
+    tol = 64 * jnp.finfo(t.dtype).eps if tol is None else tol
     inside = (t >= -tol) & (t <= 1 + tol)
     valid = valid & inside
     return jnp.where(valid, jnp.clip(t, 0, 1), 0), valid

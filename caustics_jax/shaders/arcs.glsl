@@ -10,6 +10,7 @@ const float CJ_PI_2 = 1.5707964;                 // pi / 2
 const float CJ_SQRT_EPS = 3.4526698e-04;         // sqrt(eps)
 const float CJ_ENTRY_GAP = 2.7621358e-03;        // 8 sqrt(eps): the entry point recomputed
 const float CJ_ON_TANGENT = 1.1920929e-04;       // 1e3 eps
+const float CJ_VERTEX_ZERO = 1024.0;             // arcs.VERTEX_ZERO: vertex values read as zero
 const vec2 CJ_INWARD[3] = vec2[3](vec2(0.0, 1.0), vec2(-1.0, -1.0), vec2(1.0, 0.0));  // inward edge normals
 
 // atan2 with numpy's values at zeros (atan(y, x) is undefined at (0, 0) in GLSL): +-0 for
@@ -45,6 +46,71 @@ void cj_edge_roots(float coef[6], out float t[6], out uint valid[6], out vec2 ab
     for (int i = 0; i < 6; ++i) ab[i] = cj_edge_barycentric(i / 2, t[i]);
 }
 
+// The pencil angle in [0, pi) of the curve point e + v seen from the curve point e in the
+// frame (tau, perp) (arcs.pencil_angle); dist = |v|, scale the magnitude of both points'
+// barycentrics. On the tangent line itself (a straight curve), and for a point whose offset
+// across the tangent is below the barycentrics' absolute rounding (64 eps of their
+// magnitude: the sign of `across` is noise there, that of `along` is not), ahead comes
+// first, behind last.
+float cj_pencil_angle(vec2 v, vec2 tau, vec2 perp, float dist, float scale) {
+    float along = dot(v, tau), across = dot(v, perp);
+    float phi = cj_atan2(across, along);
+    phi = phi < 0.0 ? phi + CJ_PI : phi;  // the cutting line's angle, in [0, pi)
+    bool on_tangent = abs(across) <= CJ_ON_TANGENT * dist || abs(across) <= 64.0 * CJ_EPS * scale;
+    return on_tangent ? (along > 0.0 ? CJ_EPS * dist : CJ_PI) : phi;
+}
+
+// The two points where the conic crosses the face's boundary, from the signs of the conic at
+// the three vertices and two edge quadratics (arcs.boundary_crossings; seed 001 eq. 12 at the
+// vertices: F, A + D + F, B + E + F). Returns clear: all three values beyond VERTEX_ZERO eps
+// of the largest coefficient and not of one sign, the edge whose ends agree holding no pair
+// of roots (its quadratic's extremum off the edge or on its ends' side of zero), one root on
+// each other edge. Then the curve in the face is one arc between the two roots.
+bool cj_boundary_crossings(float coef[6], out int edges[2], out float t[2], out vec2 ab[2]) {
+    float A = coef[0], B = coef[1], C = coef[2], D = coef[3], E = coef[4], F = coef[5];
+    float big = 0.0;
+    for (int i = 0; i < 6; ++i) big = max(big, abs(coef[i]));
+    float zero = CJ_VERTEX_ZERO * CJ_EPS * big;
+    vec3 values = vec3(F, A + D + F, B + E + F);  // V0, V1, V2
+    bool nonzero = abs(values.x) > zero && abs(values.y) > zero && abs(values.z) > zero;
+    bvec3 pos = greaterThan(values, vec3(0.0));
+    bvec3 differs = bvec3(pos.x != pos.y, pos.y != pos.z, pos.x != pos.z);  // edges 0, 1, 2
+    int third = !differs.x ? 0 : (!differs.y ? 1 : (!differs.z ? 2 : 0));  // argmin
+    edges[0] = (third + 1) % 3;
+    edges[1] = (third + 2) % 3;
+    vec3 q = cj_edge_quadratic(coef, third);
+    float t_star = -q.y / (q.x != 0.0 ? 2.0 * q.x : 1.0);
+    float extremum = q.z + q.y * t_star / 2.0;
+    bool pair = q.x != 0.0 && t_star > 0.0 && t_star < 1.0 && extremum * sign(q.z) <= zero;
+    bool one = true;
+    for (int j = 0; j < 2; ++j) {
+        vec2 roots;
+        bvec2 valid;
+        cj_edge_quadratic_roots(cj_edge_quadratic(coef, edges[j]), roots, valid);
+        one = one && valid.x != valid.y;
+        t[j] = valid.x ? roots.x : roots.y;
+        ab[j] = cj_edge_barycentric(edges[j], t[j]);
+    }
+    return nonzero && any(differs) && !pair && one;
+}
+
+// The exit of the arc that entered the face through entry_edge at entry_t (arcs.sign_test_exit):
+// of cj_boundary_crossings' two, the one that is not the entry; clear also needs the entry
+// edge to be one of them with its root within 8 sqrt(eps) of entry_t. Where clear,
+// cj_next_crossing returns the same exit.
+bool cj_sign_test_exit(float coef[6], int entry_edge, float entry_t, out int edge, out float t_x, out vec2 ab_x) {
+    int edges[2];
+    float t[2];
+    vec2 ab[2];
+    bool clear = cj_boundary_crossings(coef, edges, t, ab);
+    int entry = edges[0] == entry_edge ? 0 : 1;
+    bool is_entry = edges[entry] == entry_edge && abs(t[entry] - entry_t) < CJ_ENTRY_GAP;
+    edge = edges[1 - entry];
+    t_x = t[1 - entry];
+    ab_x = ab[1 - entry];
+    return clear && is_entry;
+}
+
 // The first edge root met travelling along the conic from e in direction tau
 // (arcs.next_crossing): the candidate of smallest pencil angle. Never a candidate: on the
 // entry edge, the root nearest the entry parameter when within 8 sqrt(eps) of it (the entry
@@ -77,12 +143,7 @@ bool cj_next_crossing(float t[6], uint valid[6], vec2 ab[6], vec2 e, vec2 tau, v
     int best = 0;
     float best_phi = CJ_INF;
     for (int i = 0; i < 6; ++i) {
-        vec2 v = ab[i] - e;
-        float along = dot(v, tau), across = dot(v, perp);
-        float phi = cj_atan2(across, along);
-        phi = phi < 0.0 ? phi + CJ_PI : phi;  // the cutting line's angle, in [0, pi)
-        bool on_tangent = abs(across) <= CJ_ON_TANGENT * dist[i] || abs(across) <= 64.0 * CJ_EPS * scale[i];
-        phi = on_tangent ? (along > 0.0 ? CJ_EPS * dist[i] : CJ_PI) : phi;
+        float phi = cj_pencil_angle(ab[i] - e, tau, perp, dist[i], scale[i]);
         phi = (any_cand ? cand[i] : allowed[i]) ? phi : CJ_INF;
         if (phi < best_phi) {  // strict: the first of equal angles, as argmin
             best_phi = phi;

@@ -189,24 +189,40 @@ void cj_solve_quadratic(float q2, float q1, float q0, out vec2 roots, out bvec2 
     roots = vec2(valid.x ? root0 : 0.0, valid.y ? root1 : 0.0);
 }
 
-// Intersections of the conic with the three triangle edges (seed 001 eq. 22-24, corrected
-// in math.md §3; conic.edge_intersections). Edge 0: b = 0, t = a; edge 1: (a, b) = (1 - t, t);
-// edge 2: a = 0, t = b. Outputs edge-major: t[2 e + k], valid[2 e + k].
-void cj_edge_intersections(float coef[6], out float t[6], out uint valid[6]) {
+// Quadratic (q2, q1, q0) in the edge parameter t of edge k (seed 001 eq. 22-24, corrected in
+// math.md §3; conic.edge_quadratics). Edge 0: b = 0, t = a; edge 1: (a, b) = (1 - t, t);
+// edge 2: a = 0, t = b.
+vec3 cj_edge_quadratic(float coef[6], int k) {
     float A = coef[0], B = coef[1], C = coef[2], D = coef[3], E = coef[4], F = coef[5];
-    vec3 quad[3];
-    quad[0] = vec3(A, D, F);                                   // b = 0 (eq. 23 prints A a^2 + C a + F)
-    quad[1] = vec3(A + B - C, C + E - 2.0 * A - D, A + D + F); // a = 1 - b (eq. 24)
-    quad[2] = vec3(B, E, F);                                   // a = 0 (eq. 22 prints B b^2 + D b + F)
-    const float tol = 64.0 * CJ_EPS;  // the Python kernel's float32 default (export.EDGE_TOL)
+    if (k == 0) return vec3(A, D, F);                      // b = 0 (eq. 23 prints A a^2 + C a + F)
+    if (k == 1) return vec3(A + B - C, C + E - 2.0 * A - D, A + D + F);  // a = 1 - b (eq. 24)
+    return vec3(B, E, F);                                  // a = 0 (eq. 22 prints B b^2 + D b + F)
+}
+
+// One edge's roots in [-tol, 1 + tol] clamped to [0, 1], ascending, tol = 64 eps (the Python
+// kernel's float32 default, export.EDGE_TOL; conic.edge_quadratic_roots).
+void cj_edge_quadratic_roots(vec3 quad, out vec2 t, out bvec2 valid) {
+    const float tol = 64.0 * CJ_EPS;
+    vec2 roots;
+    bvec2 ok;
+    cj_solve_quadratic(quad.x, quad.y, quad.z, roots, ok);
+    for (int j = 0; j < 2; ++j) {
+        bool keep = ok[j] && roots[j] >= -tol && roots[j] <= 1.0 + tol;
+        t[j] = keep ? clamp(roots[j], 0.0, 1.0) : 0.0;
+        valid[j] = keep;
+    }
+}
+
+// Intersections of the conic with the three triangle edges (seed 001 eq. 22-24, corrected
+// in math.md §3; conic.edge_intersections). Outputs edge-major: t[2 e + k], valid[2 e + k].
+void cj_edge_intersections(float coef[6], out float t[6], out uint valid[6]) {
     for (int k = 0; k < 3; ++k) {
         vec2 roots;
         bvec2 ok;
-        cj_solve_quadratic(quad[k].x, quad[k].y, quad[k].z, roots, ok);
+        cj_edge_quadratic_roots(cj_edge_quadratic(coef, k), roots, ok);
         for (int j = 0; j < 2; ++j) {
-            bool keep = ok[j] && roots[j] >= -tol && roots[j] <= 1.0 + tol;
-            t[2 * k + j] = keep ? clamp(roots[j], 0.0, 1.0) : 0.0;
-            valid[2 * k + j] = keep ? 1u : 0u;
+            t[2 * k + j] = roots[j];
+            valid[2 * k + j] = ok[j] ? 1u : 0u;
         }
     }
 }

@@ -276,14 +276,22 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     float side = dot(t, CJ_INWARD[clamp(k_in, 0, 2)]);
     vec2 tau, perp;
     cj_orientation(fr.coef, e, side < 0.0 ? -t : t, tau, perp);
-    float rt[6];
-    uint rv[6];
-    vec2 rab[6];
-    cj_edge_roots(fr.coef, rt, rv, rab);
     int k;
     float tt, phi;
     vec2 ab;
-    bool ok = cj_next_crossing(rt, rv, rab, e, tau, perp, k_in, t_in, k, tt, ab, phi);
+    // The exit from the vertex signs (cj_sign_test_exit); where they do not decide, the exact
+    // construction over six edge roots (walk._lean_walk_branch, the EXACT phase).
+    bool ok = cj_sign_test_exit(fr.coef, k_in, t_in, k, tt, ab);
+    if (ok) {
+        vec2 v = ab - e;
+        phi = cj_pencil_angle(v, tau, perp, cj_norm2(v), (abs(ab.x) + abs(ab.y)) + (abs(e.x) + abs(e.y)));
+    } else {
+        float rt[6];
+        uint rv[6];
+        vec2 rab[6];
+        cj_edge_roots(fr.coef, rt, rv, rab);
+        ok = cj_next_crossing(rt, rv, rab, e, tau, perp, k_in, t_in, k, tt, ab, phi);
+    }
 
     // At the entry, f is the previous exit's (the same curve point: the two faces' normals
     // agree on their shared edge); only the exit is evaluated (walk._walk_update).

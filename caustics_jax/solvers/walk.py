@@ -55,7 +55,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..curve.arcs import (
+    ArcStart,
     arc_from_point,
+    boundary_crossings,
     edge_roots,
     inside,
     inward,
@@ -63,9 +65,11 @@ from ..curve.arcs import (
     next_crossing,
     opposite,
     orientation,
+    pencil_angle,
     pencil_point,
     project_to_conic,
     root_between,
+    sign_test_exit,
 )
 from ..math.barycentric import barycentric_point
 from ..math.conic import conic_coefficients, conic_tangent
@@ -80,7 +84,11 @@ from .options import SolverOptions, option
 
 __all__ = ["Walk", "solve_walk"]
 
-WALK, BISECT, DONE = 0, 1, 2
+#: Phases of a lane (`_State.mode`): a crossing decided by the vertex signs (`WALK`), a
+#: refinement cut (`BISECT`), a crossing by the exact construction (`EXACT`: the lanes
+#: the signs leave undecided, `arcs.sign_test_exit`), done. The pool scheduler steps each
+#: phase in its own pool (`run_pools`), so the exact construction runs on those lanes only.
+WALK, BISECT, EXACT, DONE = 0, 1, 2, 3
 SCHEDULERS = ("pool", "chunked")
 
 
@@ -187,26 +195,49 @@ class _Start(NamedTuple):
     ellipse: _Ellipse
 
 
-def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
+def _first_triangle(mesh, P, L, face, ab0, found, eta, tol, lean: bool = False):
     """What the first triangle decides from `M0` (`_Start`): the exits in both directions,
     `f` there, the bracket or the walk direction, terminal conditions; `_start_states`
     builds the two walks from it, and an ellipse inside the triangle is left to
-    `_ellipse_bracket`."""
+    `_ellipse_bracket`.
+
+    `lean`: the exits from the conic's two boundary crossings (`arcs.boundary_crossings`)
+    ordered by their pencil angles from `M0`, instead of `next_crossing` over six edge
+    roots; returns `(start, clear)`, and the lanes not `clear` (the signs undecided, `M0`
+    on a crossing, a singular tangent) need the exact construction (`lean=False`)."""
     dtype = mesh.dtype
     V, N, coef = _frame(mesh, face, P, L)
     t0 = conic_tangent(coef, ab0)
     singular = jnp.linalg.norm(t0) == 0
-    roots = edge_roots(coef)
+    eps = float(np.finfo(dtype).eps)
 
     # The paper's sign of f flips at M0 (where M crosses the line PL); the "plane"
     # orientation does not, but each direction still starts its bracket a little off M0
     # so that the two brackets share no end point.
-    delta0 = 1e4 * float(np.finfo(dtype).eps)
+    delta0 = 1e4 * eps
+
+    if lean:
+        bc = boundary_crossings(coef)
+        v_x = bc.ab - ab0
+        dist_x = jnp.linalg.norm(v_x, axis=-1)
+        scale_x = jnp.sum(jnp.abs(bc.ab), axis=-1) + jnp.sum(jnp.abs(ab0))
+        # M0 away from both crossings: `leaving_at_start` changes nothing and
+        # `next_crossing` drops no candidate, so the smaller pencil angle is its exit.
+        clear = bc.clear & ~singular & jnp.all(dist_x > 8 * eps * scale_x)
+
+        def crossing(tau, perp):
+            phi = pencil_angle(v_x, tau, perp, dist_x, scale_x)
+            i = jnp.argmin(phi)
+            return jnp.asarray(True), bc.edge[i], bc.t[i], bc.ab[i], phi[i]
+    else:
+        roots = edge_roots(coef)
+
+        def crossing(tau, perp):
+            return leaving_at_start(roots, ab0, tau, next_crossing(roots, ab0, tau, perp))
 
     def direction(sign):
         tau, perp = orientation(coef, ab0, sign * t0)
-        crossing = leaving_at_start(roots, ab0, tau, next_crossing(roots, ab0, tau, perp))
-        ok, k, t, ab, phi = crossing
+        ok, k, t, ab, phi = crossing(tau, perp)
         room = jnp.linalg.norm(ab - ab0)
         delta = jnp.where(ok, jnp.minimum(delta0, 0.25 * room), delta0)
         near = project_to_conic(coef, ab0 + delta * tau)
@@ -267,9 +298,10 @@ def _first_triangle(mesh, P, L, face, ab0, found, eta, tol) -> _Start:
     ellipse = _Ellipse(coef, tau_e, perp_e, jnp.stack([nearp, nearm]), phisp, jnp.stack([fsp, fsm]),
                        jnp.stack([gsp, gsm]), st_all[3:5])
     _, k, t, ab, phi, tau, perp, phi_s, near, _ = dirs
-    return _Start(_pack_flags(flags), face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]),
-                  jnp.stack([stp, stm]), jnp.stack([gp, gm]), phi, phi_s, jnp.stack([fsp, fsm]), near, tau, perp,
-                  ellipse)
+    start = _Start(_pack_flags(flags), face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]),
+                   jnp.stack([stp, stm]), jnp.stack([gp, gm]), phi, phi_s, jnp.stack([fsp, fsm]), near, tau, perp,
+                   ellipse)
+    return (start, clear) if lean else start
 
 
 #: The booleans of `_Start.flags`, bit i = name i.
@@ -399,6 +431,18 @@ def _ellipse_bracket(mesh, P, L, eta, n_ellipse, s: _State, e: _Ellipse) -> _Sta
 def _walk_geometry(mesh, coef, g, k_in, t_in, e):
     """Enter face `g` at `e` (entry edge `k_in`): inward travel direction, next crossing."""
     return arc_from_point(coef, e, inward(k_in, coef.dtype), k_in, t_in)
+
+
+def _lean_walk_geometry(coef, k_in, t_in, e):
+    """`_walk_geometry` with the exit from the vertex signs (`arcs.sign_test_exit`):
+    `(clear, ArcStart)`; where not clear the lane takes the exact construction."""
+    clear, k, t, ab = sign_test_exit(coef, k_in, t_in)
+    tangent = conic_tangent(coef, e)
+    side = tangent @ inward(k_in, coef.dtype)
+    tau, perp = orientation(coef, e, jnp.where(side < 0, -tangent, tangent))
+    v = ab - e
+    phi = pencil_angle(v, tau, perp, jnp.linalg.norm(v), jnp.sum(jnp.abs(ab)) + jnp.sum(jnp.abs(e)))
+    return clear, ArcStart(side, tau, perp, jnp.asarray(True), k, t, ab, phi)
 
 
 def _walk_update(s: _State, g, e, geometry, fx, stx, gx, tol) -> _State:
@@ -595,6 +639,18 @@ def _walk_branch(mesh, P, L, eta, tol, s: _State) -> _State:
     return _walk_update(s, g, e, walk_geo, f1[0], st1[0], g1[0], tol)
 
 
+def _lean_walk_branch(mesh, P, L, eta, tol, s: _State) -> _State:
+    """`_walk_branch` with the sign-test exit (`_lean_walk_geometry`); a lane the signs
+    leave undecided, or leaving the mesh, is returned unchanged in the `EXACT` phase."""
+    g, k_in, t_in, e = cross_edge(mesh, s.face, s.exit_k, s.exit_t)
+    V, N, coef = _frame(mesh, g, P, L)
+    clear, geometry = _lean_walk_geometry(coef, k_in, t_in, e)
+    f1, st1, g1 = bracket_objective(V, N, P, L, geometry.ab[None], eta)
+    walked = _walk_update(s, g, e, geometry, f1[0], st1[0], g1[0], tol)
+    decided = clear & (g >= 0)
+    return jax.tree.map(lambda w, o: jnp.where(decided, w, o), walked, s._replace(mode=jnp.int32(EXACT)))
+
+
 def _bisect_branch(mesh, P, L, eta, tol, illinois, s: _State) -> _State:
     """`_step` for a lane in BISECT mode: only the refinement cut is computed."""
     V, N, coef = _frame(mesh, s.face, P, L)
@@ -620,12 +676,17 @@ def walk_ellipse(mesh: SurfaceMesh, eta, options: Walk, lane: LaneState, ellipse
 
 def walk_step(mesh: SurfaceMesh, eta, tol, options: Walk, lane: LaneState, mode: int | None = None) -> LaneState:
     """One iteration of a lane (`_step`: a crossing or a refinement cut), before the
-    turn-back (`walk_turn_back`). A lane already done is returned unchanged. `mode` (WALK
-    or BISECT) computes only that branch, for a lane known to be in it (the pool
-    scheduler); None computes both and selects (one vmapped program for all lanes)."""
+    turn-back (`walk_turn_back`). A lane already done is returned unchanged. `mode` computes only
+    that phase's branch, for a lane known to be in it (the pool scheduler): `WALK` the
+    sign-test crossing (a lane it leaves undecided moves to `EXACT` without a step),
+    `EXACT` the crossing by the exact construction, `BISECT` the refinement cut; None
+    computes the exact crossing and the cut and selects (one vmapped program for all
+    lanes, the chunked scheduler)."""
     s = lane.state
     illinois = options.bracket == "illinois"
     if mode == WALK:
+        nxt = _lean_walk_branch(mesh, lane.P, lane.L, eta, tol, s)
+    elif mode == EXACT:
         nxt = _walk_branch(mesh, lane.P, lane.L, eta, tol, s)
     elif mode == BISECT:
         nxt = _bisect_branch(mesh, lane.P, lane.L, eta, tol, illinois, s)
@@ -692,14 +753,21 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     # The first triangles' records (`_Start`), stored, then both walks built from them for
     # every lane. Lanes without a start point keep a zero record, which builds NO_CROSSING
     # with no steps (as `_first_triangle` ends them); they never step.
-    starts = map_where(first, found, None, P, L, face, ab0, found, chunk=slots)
+    def first_lean(p, l, f, a, ok):
+        return _first_triangle(mesh, p, l, f, a, ok, eta, tol, lean=True)
+
+    # Every lane's first triangle from the vertex signs, then the exact construction on
+    # the lanes the signs leave undecided (compacted: their cost is theirs alone).
+    starts, clear = map_where(first_lean, found, None, P, L, face, ab0, found, chunk=slots)
+    starts = map_where(first, found & ~clear, starts, P, L, face, ab0, found, chunk=slots)
     can_flip, state, other, is_ellipse, ellipse = jax.vmap(_start_states)(starts)
     lanes = LaneState(P, L, state, jnp.zeros_like(can_flip), can_flip, other)
     lanes = map_where(lambda lane, e: walk_ellipse(mesh, eta, options, lane, e), is_ellipse, lanes, lanes, ellipse,
                       chunk=slots)
 
-    # A walking lane and a refining one compute different branches of a step: each runs in
-    # its own pool (WALK = 0, BISECT = 1), so no lane pays for the other branch.
+    # A walking lane, a refining one and one crossing by the exact construction compute
+    # different branches of a step: each runs in its own pool (WALK = 0, BISECT = 1,
+    # EXACT = 2), so no lane pays for another branch.
     def route(lane):
         return jnp.where(_running(lane.state, max_steps), lane.state.mode, -1).astype(jnp.int32)
 
@@ -712,7 +780,7 @@ def _walk_pool(mesh, P, L, face, ab0, found, eta, tol, max_steps, options: Walk)
     # move 24 fields per lane (35 numbers) instead of 48 (66) and run no turn-back per trip
     # (docs/solvers.md, "Measurements behind the code"; `experiments/compile_options.py`'s
     # "scheduler alone" rows measure the pool as it is).
-    steps = tuple(lambda lane, m=m: walk_step(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT))
+    steps = tuple(lambda lane, m=m: walk_step(mesh, eta, tol, options, lane, m) for m in (WALK, BISECT, EXACT))
 
     def walk_pass(_, lanes):
         lanes = jax.vmap(walk_turn_back)(lanes)
