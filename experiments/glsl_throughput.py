@@ -7,7 +7,7 @@
 # curve walk of seed 001 §3.4 in float32, D (eq. 26-33) and the irradiance (eq. 25, math.md
 # §6) at the found point.
 #
-# - JAX: `solve(..., method=Walk(), features=None)` (start points included) and
+# - JAX: `solve(..., method=Walk(fallback="none"), features=None)` (start points included) and
 #   `path_irradiance` at the solutions, jitted, on the CPU, after a warm-up call.
 # - GLSL: the scene shader (`caustics_jax.shaders.scene_conformance`) in Mesa's lavapipe on
 #   the same CPU, dispatch time only (submit to fence; the shader and pipeline are compiled
@@ -68,7 +68,7 @@ def jax_pipeline(manifest, buffers):
     eta = float(lanes["eta"][0])
 
     def run():
-        sol = solve(mesh, P, L, eta=eta, method=Walk(), features=None)
+        sol = solve(mesh, P, L, eta=eta, method=Walk(fallback="none"), features=None)
         V, N = mesh.triangle(sol.triangle)
         E, _ = path_irradiance(V, N, P, L, sol.barycentric, eta, I_e, n_P, sigma_t)
         return jax.block_until_ready((sol.status, E))

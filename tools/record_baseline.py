@@ -1,7 +1,7 @@
 """Record the baseline lanes: what `caustics_jax.solve` returns on fixed inputs, lane by lane.
 
 Three scenes (the wavy pool with its default waves, a jittered heightfield, the lagoon) in
-float32 and float64, each solved by the walk (default options) and by one-step Newton
+float32 and float64, each solved by the walk (alone, and with its default Newton fallback) and by one-step Newton
 (`newton-hv-step` of the compare configurations). Per case it saves status, triangle,
 iterations, found, point and barycentric, with the inputs (P, L) and a digest of the mesh,
 to a compressed `.npz`. `tests/test_baseline.py` loads this file, builds the same cases
@@ -29,9 +29,12 @@ import caustics_jax as cj
 from caustics_jax.testing import jittered_heightfield, planted_mesh_paths
 
 DTYPES = ("float32", "float64")
-#: (method, options) of each solver configuration; "newton-hv-step" as in the compare tool.
+#: (method, options) of each solver configuration; "newton-hv-step" as in the compare tool;
+#: "walk" is the walk alone (seed 001's method, what the GLSL walk runs), "walk-fallback"
+#: the default `Walk()` (the one-step Newton on the lanes the walk ends without a path).
 METHODS = {
-    "walk": ("walk", {}),
+    "walk": ("walk", {"fallback": "none"}),
+    "walk-fallback": ("walk", {}),
     "newton-hv-step": ("newton", {"stepping": "one_step", "constraint": "half_vector"}),
 }
 FIELDS = ("status", "triangle", "iterations", "found", "point", "barycentric")

@@ -4,7 +4,7 @@ reference (DESIGN.md "Reference data for shader tests"; docs/export.md "Scenes")
 `export_scene(spec, lanes, seed)` builds the scene (`scene_registry.SceneData`), rounds the
 surface and lanes to float32 once, and on exactly those values runs
 
-- the start point and the curve walk in float32 (`solve(..., method=Walk(), features=None)`:
+- the start point and the curve walk in float32 (`solve(..., method=Walk(fallback="none"), features=None)`:
   the general walk, no closed form, as a shader runs it; seed 001 §3.4), then `D` (seed 001
   eq. 26-33) and the irradiance (eq. 25, math.md §6) at its point: the `output` fields a
   port must reproduce;
@@ -207,7 +207,10 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
     seed = check_int("seed", seed, 0, 2**63 - 1)
     if walk is not None and not isinstance(walk, Walk):
         raise ValueError(f"walk must be None or a caustics_jax.Walk, got {walk!r}")
-    walk = Walk() if walk is None else walk
+    if walk is not None and walk.fallback != "none":
+        raise ValueError("the exported lanes are the GLSL walk's reference, and the GLSL walk has no Newton "
+                         f"fallback: pass Walk(fallback='none', ...), got fallback={walk.fallback!r}")
+    walk = Walk(fallback="none") if walk is None else walk
     rng = np.random.default_rng([seed, zlib.crc32(spec.name.encode())])
     data = spec.build(rng, lanes)
     eta = float(np.float32(data.eta))
@@ -238,7 +241,7 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
         mesh64 = _mesh(V32.astype(np.float64), np.asarray(mesh.faces), N32.astype(np.float64), mesh.grid, "float64")
         P64, L64 = jnp.asarray(x64["P"]), jnp.asarray(x64["L"])
         ref = solve(mesh64, P64, L64, eta=eta, method=Walk(max_steps=walk.max_steps, bracket=walk.bracket,
-                                                           ellipse_samples=walk.ellipse_samples),
+                                                           ellipse_samples=walk.ellipse_samples, fallback="none"),
                     features=None)
         found = np.asarray(sol.status) == Status.FOUND
         face32 = np.maximum(np.asarray(sol.triangle), 0)
@@ -379,7 +382,7 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
 
 def ref_tol(walk: Walk) -> float:
     """The float64 reference walk's acceptance tolerance."""
-    return Walk(max_steps=walk.max_steps, bracket=walk.bracket).tolerance(np.float64)
+    return Walk(max_steps=walk.max_steps, bracket=walk.bracket, fallback="none").tolerance(np.float64)
 
 
 def write_scenes(out, specs, lanes: int, seed: int) -> list:

@@ -278,10 +278,40 @@ def _solve_blocks(prep: PreparedSurface, P, L, eta, start, solver, feats: SceneF
         fill += [np.int32(-1), np.zeros(2, dtype), False]
     flat = feats is not None and feats.flat and isinstance(solver, Walk)
     out = run_blocks(lambda *block: _solve_block(prep, eta, solver, flat, *block), tuple(fields), tuple(fill))
+    if isinstance(solver, Walk) and solver.fallback == "newton":
+        out = _newton_fallback(prep, eta, solver, fields, fill, out)
     sol = _empty_fields(n, dtype)
     for k, v in out.items():
         sol[k][lanes] = v
     return Solution(**jax.device_put(sol))
+
+
+#: Lanes per block of the walk's Newton fallback (`_newton_fallback`), per device: the few
+#: lanes the walk ends without a path, in blocks of their own size (one compile per mesh
+#: size class, whatever the batch).
+FALLBACK_BLOCK_LANES = 1024
+
+
+def _newton_fallback(prep: PreparedSurface, eta, walk: Walk, fields: list, fill: list, out: dict) -> dict:
+    """`Walk(fallback="newton")`: the lanes with a start point that the walk ended without a
+    path, solved again by the one-step Newton from the same start point and `tol`
+    (docs/solvers.md "Robustness on irregular meshes"); where it finds one, its point,
+    triangle, barycentrics, status and residual replace the walk's, and its iterations
+    and crossings are added to the walk's. Other lanes are untouched."""
+    failed = np.flatnonzero((out["status"] != Status.FOUND) & (out["status"] != Status.NO_CROSSING))
+    if failed.size == 0:
+        return out
+    newton = Newton(stepping="one_step", tol=walk.tolerance(prep.dtype), max_patches=64)
+    size = FALLBACK_BLOCK_LANES * len(jax.local_devices())
+    retry = run_blocks(lambda *block: _solve_block(prep, eta, newton, False, *block),
+                       tuple(x[failed] for x in fields), tuple(fill), size=size)
+    rescued = retry["found"]
+    lanes = failed[rescued]
+    for k in ("point", "triangle", "barycentric", "found", "status", "residual"):
+        out[k][lanes] = retry[k][rescued]
+    for k in ("iterations", "crossed"):
+        out[k][lanes] += retry[k][rescued]
+    return out
 
 
 def _empty_fields(n: int, dtype) -> dict:

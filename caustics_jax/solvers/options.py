@@ -61,6 +61,9 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
 
     method: ClassVar[str] = ""
     traced: ClassVar[tuple[str, ...]] = ()
+    #: Options that only the host reads (what `solve` does around the compiled program):
+    #: left out of `static`, so they compile nothing.
+    host: ClassVar[tuple[str, ...]] = ()
 
     def with_options(self, **changes):
         """A copy with the options `changes` replaced (validated like the original)."""
@@ -68,8 +71,10 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
 
     def static(self):
         """The options with the traced fields at their defaults: the hashable part jit
-        compiles for (the program reads the traced values from its array arguments)."""
-        return self.with_options(**{f.name: f.default for f in dataclasses.fields(self) if f.name in self.traced})
+        compiles for (the program reads the traced values from its array arguments; the
+        host options are not the program's)."""
+        return self.with_options(**{f.name: f.default for f in dataclasses.fields(self)
+                                    if f.name in self.traced + self.host})
 
     def tolerance(self, dtype) -> float:
         tol = getattr(self, "tol", None)

@@ -90,6 +90,7 @@ __all__ = ["Walk", "solve_walk"]
 #: phase in its own pool (`run_pools`), so the exact construction runs on those lanes only.
 WALK, BISECT, EXACT, DONE = 0, 1, 2, 3
 SCHEDULERS = ("pool", "chunked")
+FALLBACKS = ("newton", "none")
 
 
 class Walk(SolverOptions):
@@ -104,16 +105,23 @@ class Walk(SolverOptions):
     scheduler: "pool" (the rare branches only where needed, a slot pool refilled from a
         queue of unfinished lanes) or "chunked" (the previous scheduler: chunks of 256
         lanes, each until its slowest lane); same per-lane results (module docstring).
+    fallback: "newton" (default): a lane with a start point that the walk ends without a
+        path is solved again by the one-step Newton from the same `M0`
+        (`Newton(stepping="one_step")`, the same `tol`), on those lanes only; `"none"`:
+        the walk alone (seed 001's method, what the GLSL walk runs). docs/solvers.md
+        "Robustness on irregular meshes".
     """
 
     method: ClassVar[str] = "walk"
     traced: ClassVar[tuple[str, ...]] = ("tol", "max_steps")
+    host: ClassVar[tuple[str, ...]] = ("fallback",)
 
     tol: float | None = option(None, lambda v: check_tol("tol", v))
     max_steps: int = option(512, lambda v: check_int("max_steps", v, 1))
     bracket: str = option("illinois", lambda v: check_choice("bracket", v, ("illinois", "bisection")))
     ellipse_samples: int = option(64, lambda v: check_int("ellipse_samples", v, 2, 4096))
     scheduler: str = option("pool", lambda v: check_choice("scheduler", v, SCHEDULERS))
+    fallback: str = option("newton", lambda v: check_choice("fallback", v, FALLBACKS))
 
 
 class _State(NamedTuple):

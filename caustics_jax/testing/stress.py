@@ -20,6 +20,11 @@ the planted point, and every solver must return that point or another valid solu
 - `far_light`: `L` `1e5`-`1e6` m away (nearly directional).
 - `scale_1e-3`, `scale_1e4`: the baseline scene and paths scaled by `1e-3` and `1e4`.
 - `large`: the baseline on a 250,632-triangle pool (too large for the exhaustive reference).
+- `irregular`, `irregular_steep`, `irregular_fine`: an irregular mesh (the heightfield
+  grid with every interior vertex moved by up to 30% of a cell, `jittered_heightfield`,
+  2,048 faces) under gentle waves (amplitude 0.05 m over 4 m), steep ones (0.15 m) and
+  a fine one (the same waves over 1.2 m: 15x the triangles per wavelength); the meshes
+  where the walk alone loses lanes (docs/solvers.md "Robustness on irregular meshes").
 - `multi_solution`: several refraction points per receiver: a lagoon (irregular Delaunay
   mesh) under two steep short waves (amplitude 0.1 m, wavelengths 0.6-0.9 m, slopes
   near 1), receivers 0.5-2.5 m below, past the waves' focal distance (about 0.4 m): the
@@ -193,6 +198,14 @@ def _scaled(case: StressCase, s: float, name: str) -> StressCase:
                                P=case.P * s, L=case.L * s)
 
 
+def _irregular(seed, amplitude=0.05, half=2.0):
+    from .jittered_wave import jittered_heightfield
+
+    with precision("float64"):
+        m = jittered_heightfield(32, seed=seed, half=half, jitter=0.3, amplitude=amplitude)
+    return (np.asarray(m.vertices, np.float64), np.asarray(m.faces), np.asarray(m.normals, np.float64), None)
+
+
 def _steep_lagoon(seed):
     with precision("float64"):
         return _surface(scenes.lagoon(SMALL_TRIANGLES, seed=seed, size=(4.0, 4.0), amplitude=0.1, n_waves=2,
@@ -229,6 +242,12 @@ def _make(name: str, n: int, seed: int) -> StressCase:
         return _scaled(_planted(name, _wavy(seed=seed), n, seed), float(name.split("_")[1]), name)
     if name == "large":
         return _planted(name, _wavy(LARGE_TRIANGLES, seed=seed), n, seed)
+    if name == "irregular":
+        return _planted(name, _irregular(seed), n, seed)
+    if name == "irregular_steep":
+        return _planted(name, _irregular(seed, amplitude=0.15), n, seed)
+    if name == "irregular_fine":
+        return _planted(name, _irregular(seed, half=0.6), n, seed)
     if name == "multi_solution":
         return _planted(name, _steep_lagoon(seed), n, seed, depth=(0.5, 2.5), max_angle_deg=30.0)
     raise ValueError(f"unknown stress category {name!r}; known: {CATEGORIES}")
@@ -236,7 +255,7 @@ def _make(name: str, n: int, seed: int) -> StressCase:
 
 CATEGORIES = ("baseline", "grazing", "near_tir", "sliver", "flat", "nearly_flat", "vertex_edge",
               "vertex_edge_flat", "p_near_surface", "far_light", "scale_1e-3", "scale_1e4", "large",
-              "multi_solution")
+              "irregular", "irregular_steep", "irregular_fine", "multi_solution")
 
 
 def stress_case(category: str, n: int = 256, seed: int = 0) -> StressCase:
