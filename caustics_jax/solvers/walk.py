@@ -14,7 +14,10 @@ Per lane, from the start point `M0` (on the conic by construction, §3.4.2):
    through the pencil and bracket a sign change.
 2. Walk (§3.4.3): cross the exit edge into the neighbour (adjacency buffer), orient the
    tangent inward, find the next crossing along the curve, evaluate `f`; cross again
-   while `f` keeps its sign.
+   while `f` keeps its sign. The next crossing comes from the conic's signs at the three
+   vertices and two edge quadratics (`arcs.sign_test_exit`); where the signs do not decide
+   (a curve near a vertex, a re-entry, a pair of roots on one edge), from the pencil order
+   of step 1, in the `EXACT` phase: the same exit wherever both decide.
 3. Refine ("dichotomy"): the sign change lies on the arc between the entry point and the
    exit; cut the arc by lines through the entry point at angle `phi` (the paper splits
    the triangle so that the new edge cuts the curve; a line through a known curve point
@@ -31,7 +34,9 @@ that has a start point, the 64-sample ellipse search (step 1's rare case) only f
 lanes whose curve has no edge crossing (`pools.map_where`), and steps the lanes in two
 slot pools, one for walking lanes (crossings) and one for refining lanes (dichotomy and
 TIR-onset search), each refilled from a queue of lanes in its mode (`pools.run_pools`),
-so a step computes only the branch its lane needs. `"chunked"` is the
+so a step computes only the branch its lane needs (a third pool, `EXACT`, crosses the
+lanes the vertex signs leave undecided; the first triangles likewise take the sign test
+for every lane and the exact construction on the rest). `"chunked"` is the
 previous scheduler (every lane computes the ellipse samples; fixed chunks of 256 lanes,
 each until its slowest lane), kept for comparison. Both apply the same per-lane functions
 (`_first_triangle` and `_start_states`, which `walk_init` composes; `walk_step` and
