@@ -56,6 +56,8 @@ from .reporting import log, stats
 CONFIGS: dict[str, tuple[str, dict]] = {
     "walk": ("walk", {}),
     "walk-bisection": ("walk", {"bracket": "bisection"}),
+    # The walk without its Newton fallback: seed 001's method alone, what the GLSL walk runs.
+    "walk-alone": ("walk", {"fallback": "none"}),
     "newton-hv": ("newton", {"solver": "newton", "constraint": "half_vector"}),
     "newton-ad": ("newton", {"solver": "newton", "constraint": "angle_difference"}),
     "chord-hv": ("newton", {"solver": "chord", "constraint": "half_vector"}),

@@ -11,7 +11,6 @@ proportional to those lanes.
 
 from __future__ import annotations
 
-import functools
 import os
 
 import jax
@@ -115,17 +114,9 @@ def run_pools(steps: tuple, route, states, slots: int):
 
     def body(c):
         states, (bufs, heads, tails, lanes_, slot_states) = c[0], (list(x) for x in c[1:])
-        # A step costs its pool's every slot, busy or not: a pool at least half full steps;
-        # the others wait (their queues keep filling their slots) unless no pool is half
-        # full, when every busy pool steps (so the loop always advances).
-        counts = [jnp.sum(lane < n, dtype=jnp.int32) for lane in lanes_]
-        full = [2 * count >= slots for count in counts]
-        any_full = functools.reduce(jnp.logical_or, full)
         for k in range(K):
             busy = lanes_[k] < n
-            go = (counts[k] > 0) & (full[k] | ~any_full)
-            busy = busy & go
-            stepped = jax.lax.cond(go, lambda s, k=k: packing.pack(jax.vmap(steps[k])(packing.unpack(s))),
+            stepped = jax.lax.cond(jnp.any(busy), lambda s, k=k: packing.pack(jax.vmap(steps[k])(packing.unpack(s))),
                                    lambda s: s, slot_states[k])
             to = jax.vmap(route)(packing.unpack(stepped))
             leave = busy & (to != k)

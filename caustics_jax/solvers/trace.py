@@ -24,11 +24,17 @@ face through an edge it leaves through another edge, or it closes).
   Every open component has two ends on the boundary, so every open component is traced
   (twice: once from each end).
 
-**Not guaranteed:** a closed component that does not pass through `M0` (a loop of the
-curve around a dimple of the surface, or an ellipse inside one face) has no boundary
-root and no start point on it; its solutions are missed. They are rare on water-like
-surfaces (`experiments/estimators.py` and docs/solvers.md measure the recall against the
-certified exhaustive reference); `method="exhaustive"` finds them. Also not guaranteed
+- `"faces"` (default): also the closed components. A closed component that does not
+  pass through `M0` (a loop of the curve around a dimple of the surface, or an ellipse
+  inside one face) has no boundary root and no start point on it. Its solutions lie on
+  faces that the certified reference's cone test keeps (`accel.cones.candidate_faces`: a
+  face whose normals and position cannot refract `P -> M -> L` holds no solution), so
+  the arcs of every such face are scanned face by face with the reference's root finder (`exhaustive.candidate_roots`), and their roots join the
+  traced ones (deduplicated). The cost is the reference's scan of those faces
+  (docs/solvers.md measures it).
+
+**Not guaranteed** (with `"start"` and `"boundary"`): the closed components above;
+`method="exhaustive"` and `seeds="faces"` find them. Also not guaranteed
 where a trace is cut short: more than `max_steps` faces (status `MAX_STEPS`), or more than
 `max_arcs` arc pieces with a possible root on one trace (also `MAX_STEPS`), or the curve
 lost at a tangency or a singular point (`LOST_CURVE`); the lane's status says so.
@@ -49,7 +55,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..accel.cones import may_refract, patch_tree
+from ..accel.cones import candidate_faces, may_refract, patch_tree
 from ..curve.arc_roots import (
     ArcPiece,
     arc_polynomial,
@@ -64,7 +70,7 @@ from ..runtime.arguments import check_choice, check_int, check_real, check_tol
 from ..runtime.lanes import map_lanes, padded_index, power_of_two_bucket
 from ..surface.mesh import cross_edge
 from ._solution import Status
-from .exhaustive import Exhaustive
+from .exhaustive import Exhaustive, candidate_roots
 from .options import SolverOptions, option
 from .solution_set import ExhaustiveSolution, assemble, padded_call, piece_polynomials, refine_intervals
 
@@ -76,8 +82,11 @@ class Trace(SolverOptions):
     """All solutions on the traced coplanarity curve (module docstring) and its options.
 
     tol: acceptance `|f| <= tol`, in `(0, 1)` (default 1e-10 float64, 1e-5 float32).
-    seeds: `"boundary"` (the component through `M0` and every component that meets the
-        boundary) or `"start"` (only the component through `M0`).
+    seeds: `"faces"` (default: the components `"boundary"` traces, and the arcs of every
+        face the cone test keeps, scanned by the certified reference's root finder, so
+        closed components are found too), `"boundary"` (the component through `M0` and
+        every component that meets the boundary) or `"start"` (only the component through
+        `M0`).
     max_steps: faces per trace, in `[1, 2^20]`.
     max_arcs: arc pieces with a possible root recorded per trace, in `[1, 1024]`.
     iters: bisection steps per isolated root, in `[1, 200]`.
@@ -93,7 +102,7 @@ class Trace(SolverOptions):
     method: ClassVar[str] = "trace"
 
     tol: float | None = option(None, lambda v: check_tol("tol", v))
-    seeds: str = option("boundary", lambda v: check_choice("seeds", v, ("boundary", "start")))
+    seeds: str = option("faces", lambda v: check_choice("seeds", v, ("faces", "boundary", "start")))
     max_steps: int = option(4096, lambda v: check_int("max_steps", v, 1, 2**20))
     max_arcs: int = option(32, lambda v: check_int("max_arcs", v, 1, 1024))
     iters: int = option(60, lambda v: check_int("iters", v, 1, 200))
@@ -280,7 +289,7 @@ def solve_trace(mesh, P, L, eta, start, options: Trace, padded) -> ExhaustiveSol
                              jnp.asarray(ab0[m0_lanes], dtype))
         seed_lanes.append(np.concatenate([m0_lanes, m0_lanes]))
         seed_parts.append(seeds)
-    if options.seeds == "boundary":
+    if options.seeds in ("boundary", "faces"):
         b_lane, b_seeds = _boundary_seeds(mesh, P, L)
         if b_lane.size:
             seed_lanes.append(b_lane)
@@ -315,6 +324,18 @@ def solve_trace(mesh, P, L, eta, start, options: Trace, padded) -> ExhaustiveSol
                                              refine_opts)
         ok = (np.abs(f) <= tol) & (st == ObjectiveStatus.OK)
         owner, pts, tris, abs_, res = lanes_rows[row[ok]], M[ok], faces_rows[row[ok]], ab[ok], f[ok]
+    if options.seeds == "faces":
+        # Closed components: the arcs of every face that may refract (the cone test of the
+        # certified reference), scanned face by face by the reference's root finder
+        # (`exhaustive.candidate_roots`). Every face, traced or not: a traced face may hold
+        # another component's arc too.
+        c_lane, c_face = (x.astype(np.int32) for x in candidate_faces(mesh, P, L, eta))
+        scan = Exhaustive(tol=tol, iters=options.iters, max_depth=depth, chunk=options.chunk)
+        pair, M, ab, f, st = candidate_roots(padded, P, L, eta, c_lane, c_face, scan)
+        ok = (np.abs(f) <= tol) & (st == ObjectiveStatus.OK)
+        owner = np.concatenate([owner, c_lane[pair[ok]]])
+        pts, tris = np.concatenate([pts, M[ok]]), np.concatenate([tris, c_face[pair[ok]]])
+        abs_, res = np.concatenate([abs_, ab[ok]]), np.concatenate([res, f[ok]])
     extent = float(np.max(np.abs(np.asarray(mesh.vertices)), initial=0.0))
     result = assemble(mesh, P, L, eta, start, tol, options.dedupe_radius(dtype, extent), owner, pts, tris, abs_,
                       res)

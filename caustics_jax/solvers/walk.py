@@ -112,7 +112,8 @@ class Walk(SolverOptions):
         lanes, each until its slowest lane); same per-lane results (module docstring).
     fallback: "newton" (default): a lane with a start point that the walk ends without a
         path is solved again by the one-step Newton from the same `M0`
-        (`Newton(stepping="one_step")`, the same `tol`), on those lanes only; `"none"`:
+        (`Newton(stepping="one_step")`, the same `tol`; then, where that fails too, from
+        Cycles' gentle first step 0.1), on those lanes only; `"none"`:
         the walk alone (seed 001's method, what the GLSL walk runs). docs/solvers.md
         "Robustness on irregular meshes".
     """
