@@ -18,7 +18,7 @@ import time
 import jax
 import numpy as np
 
-from caustics_jax.app.reporting import log
+from caustics_jax.app.reporting import log, stats  # noqa: F401  (re-exported for the experiments)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 

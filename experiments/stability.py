@@ -387,7 +387,7 @@ def plot(result, path):
     axes[0].set_title("Success on planted paths, per stress category")
     axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3)
     axes[1].set_xscale("log")
-    axes[1].set_xlabel("refraction angle error of FOUND lanes (rad, float64 re-evaluation; marker max, bar p99)")
+    axes[1].set_xlabel("refraction angle error of FOUND lanes (rad, float64 re-evaluation)\nmarker: max, bar: p99")
     axes[1].set_title("Accuracy of what the solvers report as found")
     axes[1].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3)
     nan = sum(v["nonfinite"] for v in totals(result).values())
