@@ -30,8 +30,8 @@ face through an edge it leaves through another edge, or it closes).
   faces that the certified reference's cone test keeps (`accel.cones.candidate_faces`: a
   face whose normals and position cannot refract `P -> M -> L` holds no solution), so
   the arcs of every such face are scanned face by face with the reference's root finder
-  (`exhaustive.candidate_roots`), and their roots join the traced ones (deduplicated). The cost is the reference's scan of those faces
-  (docs/solvers.md measures it).
+  (`exhaustive.candidate_roots`), and their roots join the traced ones (deduplicated).
+  The cost is the reference's scan of those faces (docs/solvers.md measures it).
 
 **Not guaranteed** (with `"start"` and `"boundary"`): the closed components above;
 `method="exhaustive"` and `seeds="faces"` find them. Also not guaranteed
