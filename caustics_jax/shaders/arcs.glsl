@@ -68,30 +68,30 @@ float cj_pencil_angle(vec2 v, vec2 tau, vec2 perp, float dist, float scale) {
 // each other edge. Then the curve in the face is one arc between the two roots.
 bool cj_boundary_crossings(float coef[6], out int edges[2], out float t[2], out vec2 ab[2]) {
     float A = coef[0], B = coef[1], C = coef[2], D = coef[3], E = coef[4], F = coef[5];
-    float big = 0.0;
-    for (int i = 0; i < 6; ++i) big = max(big, abs(coef[i]));
+    float big = max(max(max(abs(A), abs(B)), max(abs(C), abs(D))), max(abs(E), abs(F)));
     float zero = CJ_VERTEX_ZERO * CJ_EPS * big;
     vec3 values = vec3(F, A + D + F, B + E + F);  // V0, V1, V2
     bool nonzero = abs(values.x) > zero && abs(values.y) > zero && abs(values.z) > zero;
     bvec3 pos = greaterThan(values, vec3(0.0));
     bvec3 differs = bvec3(pos.x != pos.y, pos.y != pos.z, pos.x != pos.z);  // edges 0, 1, 2
     int third = !differs.x ? 0 : (!differs.y ? 1 : (!differs.z ? 2 : 0));  // argmin
-    edges[0] = (third + 1) % 3;
-    edges[1] = (third + 2) % 3;
-    vec3 q = cj_edge_quadratic(coef, third);
+    int ka = third == 2 ? 0 : third + 1, kb = third == 0 ? 2 : third - 1;  // (third + 1, + 2) % 3
+    vec3 q0 = vec3(A, D, F), q1 = vec3(A + B - C, C + E - 2.0 * A - D, A + D + F), q2 = vec3(B, E, F);
+    vec3 q = third == 0 ? q0 : (third == 1 ? q1 : q2);
     float t_star = -q.y / (q.x != 0.0 ? 2.0 * q.x : 1.0);
     float extremum = q.z + q.y * t_star / 2.0;
     bool pair = q.x != 0.0 && t_star > 0.0 && t_star < 1.0 && extremum * sign(q.z) <= zero;
-    bool one = true;
-    for (int j = 0; j < 2; ++j) {
-        vec2 roots;
-        bvec2 valid;
-        cj_edge_quadratic_roots(cj_edge_quadratic(coef, edges[j]), roots, valid);
-        one = one && valid.x != valid.y;
-        t[j] = valid.x ? roots.x : roots.y;
-        ab[j] = cj_edge_barycentric(edges[j], t[j]);
-    }
-    return nonzero && any(differs) && !pair && one;
+    vec2 ra, rb;
+    bvec2 va, vb;
+    cj_edge_quadratic_roots(ka == 0 ? q0 : (ka == 1 ? q1 : q2), ra, va);
+    cj_edge_quadratic_roots(kb == 0 ? q0 : (kb == 1 ? q1 : q2), rb, vb);
+    edges[0] = ka;
+    edges[1] = kb;
+    t[0] = va.x ? ra.x : ra.y;
+    t[1] = vb.x ? rb.x : rb.y;
+    ab[0] = cj_edge_barycentric(ka, t[0]);
+    ab[1] = cj_edge_barycentric(kb, t[1]);
+    return nonzero && any(differs) && !pair && va.x != va.y && vb.x != vb.y;
 }
 
 // The exit of the arc that entered the face through entry_edge at entry_t (arcs.sign_test_exit):
@@ -103,11 +103,11 @@ bool cj_sign_test_exit(float coef[6], int entry_edge, float entry_t, out int edg
     float t[2];
     vec2 ab[2];
     bool clear = cj_boundary_crossings(coef, edges, t, ab);
-    int entry = edges[0] == entry_edge ? 0 : 1;
-    bool is_entry = edges[entry] == entry_edge && abs(t[entry] - entry_t) < CJ_ENTRY_GAP;
-    edge = edges[1 - entry];
-    t_x = t[1 - entry];
-    ab_x = ab[1 - entry];
+    bool entry_a = edges[0] == entry_edge;
+    bool is_entry = (entry_a || edges[1] == entry_edge) && abs((entry_a ? t[0] : t[1]) - entry_t) < CJ_ENTRY_GAP;
+    edge = entry_a ? edges[1] : edges[0];
+    t_x = entry_a ? t[1] : t[0];
+    ab_x = entry_a ? ab[1] : ab[0];
     return clear && is_entry;
 }
 

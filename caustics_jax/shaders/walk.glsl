@@ -84,11 +84,8 @@ struct Direction {
     float room;
 };
 
-Direction cj_direction(float coef[6], float rt[6], uint rv[6], vec2 rab[6], vec2 ab0, vec2 t0) {
-    Direction d;
-    cj_orientation(coef, ab0, t0, d.tau, d.perp);
-    d.ok = cj_next_crossing(rt, rv, rab, ab0, d.tau, d.perp, -1, 0.0, d.k, d.t, d.ab, d.phi);
-    d.ok = cj_leaving_at_start(rt, rv, rab, ab0, d.tau, d.k, d.t, d.ab, d.phi) || d.ok;
+// The near point of a direction whose exit is known (walk._first_triangle's `direction`).
+Direction cj_direction_near(float coef[6], vec2 ab0, Direction d) {
     d.room = cj_norm2(d.ab - ab0);
     float delta = d.ok ? min(CJ_DELTA0, 0.25 * d.room) : CJ_DELTA0;
     d.near = cj_project_to_conic(coef, ab0 + delta * d.tau);
@@ -96,6 +93,32 @@ Direction cj_direction(float coef[6], float rt[6], uint rv[6], vec2 rab[6], vec2
     float phi_s = cj_atan2(dot(v, d.perp), dot(v, d.tau));
     d.phi_s = min(max(phi_s, 0.0), d.ok ? d.phi / 2.0 : CJ_PI_2);
     return d;
+}
+
+// The exit by the pencil order over six edge roots (cj_next_crossing, cj_leaving_at_start).
+Direction cj_direction(float coef[6], float rt[6], uint rv[6], vec2 rab[6], vec2 ab0, vec2 t0) {
+    Direction d;
+    cj_orientation(coef, ab0, t0, d.tau, d.perp);
+    d.ok = cj_next_crossing(rt, rv, rab, ab0, d.tau, d.perp, -1, 0.0, d.k, d.t, d.ab, d.phi);
+    d.ok = cj_leaving_at_start(rt, rv, rab, ab0, d.tau, d.k, d.t, d.ab, d.phi) || d.ok;
+    return cj_direction_near(coef, ab0, d);
+}
+
+// The exit as the boundary crossing of smaller pencil angle (cj_boundary_crossings; walk's
+// lean first triangle): dist and scale of the two crossings from ab0.
+Direction cj_direction_lean(float coef[6], int edges[2], float t[2], vec2 ab[2], float dist[2], float scale[2],
+                            vec2 ab0, vec2 t0) {
+    Direction d;
+    cj_orientation(coef, ab0, t0, d.tau, d.perp);
+    float phi0 = cj_pencil_angle(ab[0] - ab0, d.tau, d.perp, dist[0], scale[0]);
+    float phi1 = cj_pencil_angle(ab[1] - ab0, d.tau, d.perp, dist[1], scale[1]);
+    int i = phi1 < phi0 ? 1 : 0;  // the first of equal angles, as argmin
+    d.ok = true;
+    d.k = edges[i];
+    d.t = t[i];
+    d.ab = ab[i];
+    d.phi = i == 1 ? phi1 : phi0;
+    return cj_direction_near(coef, ab0, d);
 }
 
 // The initial state of one of the two walks from M0 (walk._start_states's `build`).
@@ -166,12 +189,29 @@ void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta
     Frame fr = cj_frame(face, P, L);
     vec2 t0 = cj_conic_tangent(fr.coef, ab0);
     bool singular = dot(t0, t0) == 0.0;
-    float rt[6];
-    uint rv[6];
-    vec2 rab[6];
-    cj_edge_roots(fr.coef, rt, rv, rab);
-    Direction dp = cj_direction(fr.coef, rt, rv, rab, ab0, t0);
-    Direction dm = cj_direction(fr.coef, rt, rv, rab, ab0, -t0);
+    // The exits from the vertex signs (cj_boundary_crossings) where they decide and M0 is
+    // neither crossing; else the pencil order over six edge roots (walk._first_triangle).
+    int b_edge[2];
+    float b_t[2], b_dist[2], b_scale[2];
+    vec2 b_ab[2];
+    bool clear = cj_boundary_crossings(fr.coef, b_edge, b_t, b_ab) && !singular;
+    for (int j = 0; j < 2; ++j) {
+        b_dist[j] = cj_norm2(b_ab[j] - ab0);
+        b_scale[j] = (abs(b_ab[j].x) + abs(b_ab[j].y)) + (abs(ab0.x) + abs(ab0.y));
+        clear = clear && b_dist[j] > 8.0 * CJ_EPS * b_scale[j];
+    }
+    Direction dp, dm;
+    if (clear) {
+        dp = cj_direction_lean(fr.coef, b_edge, b_t, b_ab, b_dist, b_scale, ab0, t0);
+        dm = cj_direction_lean(fr.coef, b_edge, b_t, b_ab, b_dist, b_scale, ab0, -t0);
+    } else {
+        float rt[6];
+        uint rv[6];
+        vec2 rab[6];
+        cj_edge_roots(fr.coef, rt, rv, rab);
+        dp = cj_direction(fr.coef, rt, rv, rab, ab0, t0);
+        dm = cj_direction(fr.coef, rt, rv, rab, ab0, -t0);
+    }
     vec2 tau_e, perp_e;
     cj_orientation(fr.coef, ab0, t0, tau_e, perp_e);
 
