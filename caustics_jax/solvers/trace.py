@@ -19,7 +19,7 @@ face through an edge it leaves through another edge, or it closes).
 
 - `"start"`: the component through `M0` (the walk's), in both directions from `M0`
   until it meets the boundary twice or returns to `M0`.
-- `"boundary"` (default): also every component that meets the boundary: the conic's
+- `"boundary"`: also every component that meets the boundary: the conic's
   roots on every boundary edge are seeds, and each is traced inward to its other end.
   Every open component has two ends on the boundary, so every open component is traced
   (twice: once from each end).
