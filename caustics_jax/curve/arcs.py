@@ -164,11 +164,10 @@ def boundary_crossings(coef) -> BoundaryCrossings:
     one on a crossing edge. The roots are `edge_quadratic_roots` of those edges: where
     clear, bit for bit `edge_roots`' own.
     """
-    A, B, C, D, E, F = coef
     dtype = coef.dtype
     eps = float(np.finfo(dtype).eps)
     zero = VERTEX_ZERO * eps * jnp.max(jnp.abs(coef))
-    values = jnp.stack([F, A + D + F, B + E + F])  # V0, V1, V2
+    values = conic_value(coef, jnp.asarray([[0, 0], [1, 0], [0, 1]], dtype))  # V0, V1, V2
     nonzero = jnp.all(jnp.abs(values) > zero)
     pos = values > 0
     differs = jnp.stack([pos[0] != pos[1], pos[1] != pos[2], pos[0] != pos[2]])  # edges 0, 1, 2

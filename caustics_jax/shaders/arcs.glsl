@@ -67,16 +67,17 @@ float cj_pencil_angle(vec2 v, vec2 tau, vec2 perp, float dist, float scale) {
 // of roots (its quadratic's extremum off the edge or on its ends' side of zero), one root on
 // each other edge. Then the curve in the face is one arc between the two roots.
 bool cj_boundary_crossings(float coef[6], out int edges[2], out float t[2], out vec2 ab[2]) {
-    float A = coef[0], B = coef[1], C = coef[2], D = coef[3], E = coef[4], F = coef[5];
-    float big = max(max(max(abs(A), abs(B)), max(abs(C), abs(D))), max(abs(E), abs(F)));
+    float big = max(max(max(abs(coef[0]), abs(coef[1])), max(abs(coef[2]), abs(coef[3]))),
+                    max(abs(coef[4]), abs(coef[5])));
     float zero = CJ_VERTEX_ZERO * CJ_EPS * big;
-    vec3 values = vec3(F, A + D + F, B + E + F);  // V0, V1, V2
+    vec3 values = vec3(cj_conic_value(coef, vec2(0.0, 0.0)), cj_conic_value(coef, vec2(1.0, 0.0)),
+                       cj_conic_value(coef, vec2(0.0, 1.0)));  // V0, V1, V2
     bool nonzero = abs(values.x) > zero && abs(values.y) > zero && abs(values.z) > zero;
     bvec3 pos = greaterThan(values, vec3(0.0));
     bvec3 differs = bvec3(pos.x != pos.y, pos.y != pos.z, pos.x != pos.z);  // edges 0, 1, 2
     int third = !differs.x ? 0 : (!differs.y ? 1 : (!differs.z ? 2 : 0));  // argmin
     int ka = third == 2 ? 0 : third + 1, kb = third == 0 ? 2 : third - 1;  // (third + 1, + 2) % 3
-    vec3 q0 = vec3(A, D, F), q1 = vec3(A + B - C, C + E - 2.0 * A - D, A + D + F), q2 = vec3(B, E, F);
+    vec3 q0 = cj_edge_quadratic(coef, 0), q1 = cj_edge_quadratic(coef, 1), q2 = cj_edge_quadratic(coef, 2);
     vec3 q = third == 0 ? q0 : (third == 1 ? q1 : q2);
     float t_star = -q.y / (q.x != 0.0 ? 2.0 * q.x : 1.0);
     float extremum = q.z + q.y * t_star / 2.0;
