@@ -254,3 +254,45 @@ for label, rep in reports.items():
     for q in compare.ratios(rep):
         print(f"{label:<16}[{q['dtype']}] walk / {q['best_newton']}: {q['speed_ratio']:.2f}x "
               f"(success {fmt(q['walk_success'], '.3f')} vs {fmt(q['newton_success'], '.3f')})")
+
+# %% [markdown]
+# ## The same race in GLSL: the walk and the one-step Newton as shaders
+#
+# The comparison above runs the solvers in JAX, whose cost model (vmapped selects, XLA:CPU
+# fusion) is not a shader's. `python -m experiments.glsl_throughput` runs the GLSL walk and
+# the GLSL one-step Newton (`newton-hv-step`, `caustics_jax/shaders/newton.glsl`) on
+# lavapipe, beside the same two solvers in JAX, on the same lanes of the exported scenes
+# (start point through the face cells, the solver, D and E; float32), alternating, CPU time
+# per lane. This cell reads its committed result, `figures/glsl_throughput.json`; rerun the
+# experiment (`make figures-vulkan`) to measure this machine. Lavapipe is a CPU standing in
+# for a GPU: the ratios are provisional until `tools/gpu_recipe.py` runs on one
+# (docs/export.md "The race in GLSL").
+
+# %%
+import json  # noqa: E402
+
+glsl = json.loads((Path(cj.__file__).resolve().parents[1] / "figures" / "glsl_throughput.json").read_text())
+rows = {(r["scene"], r["solver"]): r for r in glsl["rows"]}
+names = list(glsl["ratios"])
+print(f"{'scene':<14}{'solver':<8}{'JAX us/lane':>12}{'GLSL us/lane':>14}{'iterations':>12}"
+      f"{'in subgroups of ' + str(glsl['subgroup_size']):>22}")
+for name in names:
+    for solver in glsl["solvers"]:
+        r = rows[name, solver]
+        print(f"{name:<14}{solver:<8}{r['jax_cpu_us_per_lane']:>12.1f}{r['glsl_cpu_us_per_lane']:>14.2f}"
+              f"{r['iterations_per_lane']:>12.2f}{r['iterations_per_subgroup_lane']:>22.2f}")
+fig, ax = plt.subplots(1, 2, figsize=(10, 3.4))
+x = np.arange(len(names))
+for k, solver in enumerate(glsl["solvers"]):
+    ax[0].bar(x + (k - 0.5) * 0.4, [rows[n, solver]["jax_cpu_us_per_lane"] for n in names], 0.4, label=solver)
+    ax[1].bar(x + (k - 0.5) * 0.4, [rows[n, solver]["glsl_cpu_us_per_lane"] for n in names], 0.4, label=solver)
+for a, title in zip(ax, ("JAX on XLA:CPU", f"GLSL on {glsl['rows'][0]['device']}"), strict=True):
+    a.set_xticks(x, names, fontsize=8)
+    a.set(title=title, ylabel="CPU time per lane (us)")
+    a.legend(fontsize=8)
+fig.suptitle(f"Walk against one-step Newton, float32, {glsl['lanes']} lanes per scene (same CPU, one process)")
+fig.tight_layout()
+plt.show()
+for name, q in glsl["ratios"].items():
+    print(f"{name:<14} walk / Newton: GLSL {q['glsl_walk_over_newton_cpu']:.2f}, "
+          f"JAX {q['jax_walk_over_newton_cpu']:.2f}")

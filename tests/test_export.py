@@ -329,12 +329,13 @@ def test_a_name_given_twice_is_exported_once_and_one_string_is_one_name(tmp_path
     assert ex.c_header([ex.KERNELS["fresnel"]] * 2).count("typedef struct cj_fresnel_record") == 1
     seen = []
     monkeypatch.setattr(ex.scene_writer, "write_scenes",
-                        lambda out, specs, lanes, seed: seen.append([s.name for s in specs]) or [])
+                        lambda out, specs, lanes, seed, solvers: seen.append(([s.name for s in specs], solvers)) or [])
     ex.export(tmp_path / "s", kernels=[], scenes="flat_pool")
-    ex.export(tmp_path / "s", kernels=[], scenes=("lagoon", "flat_pool", "lagoon"))
-    assert seen == [["flat_pool"], ["lagoon", "flat_pool"]]
+    ex.export(tmp_path / "s", kernels=[], scenes=("lagoon", "flat_pool", "lagoon"), solvers="newton")
+    assert seen == [(["flat_pool"], ("walk", "newton")), (["lagoon", "flat_pool"], ("newton",))]
     for kwargs, match in [(dict(kernels=5), "kernels must be None, a kernel name or a list of kernel names"),
                           (dict(kernels=[], scenes=5), "scenes must be None, a scene name or a list of scene names"),
+                          (dict(kernels=[], scenes="lagoon", solvers=["walk", "trace"]), "unknown solver"),
                           (dict(kernels=[["fresnel"]]), "unknown kernel"),
                           (dict(kernels="fresnell"), "unknown kernel")]:
         with pytest.raises(ValueError, match=match):
@@ -514,15 +515,18 @@ def test_scene_surface_is_a_consistent_mesh(scene_data, scene):
         assert m["grid"] is None and p["grid_nx"][0] == 0
 
 
+@pytest.mark.parametrize("solver", ["walk", "newton"])
 @pytest.mark.parametrize("scene", SCENE_NAMES)
-def test_scene_lanes_hold_valid_walk_results_checked_by_the_oracle(scene_data, scene):
-    """The expected lanes, judged independently: start points on the segment, FOUND points
-    refracting to within tol (float64 oracle), the float64 reference to 1e-9, zeros where
-    nothing was found."""
+def test_scene_lanes_hold_valid_solver_results_checked_by_the_oracle(scene_data, scene, solver):
+    """The expected lanes of both solvers, judged independently: start points on the
+    segment, FOUND points refracting to within tol (float64 oracle), the float64 reference
+    to 1e-9, zeros where nothing was found."""
     from caustics_jax import Status
     from caustics_jax.testing import oracle
 
-    m, b = ex.load_scene(scene_data, scene)
+    m, b = ex.load_scene(scene_data, ex.scene_stem(scene, solver))
+    assert m["solver"] == solver == m["options"]["method"]
+    assert b["scene"]["solver"][0] == {"walk": 0, "newton": 1}[solver]
     lanes, v, f = b["lanes"], b["vertices"], b["faces"]
     mesh = oracle.NumpyMesh(v["position"].astype(np.float64), f["v"].astype(np.int64),
                             v["normal"].astype(np.float64))
@@ -559,6 +563,29 @@ def test_scene_lanes_hold_valid_walk_results_checked_by_the_oracle(scene_data, s
     dist = np.linalg.norm(lanes["M"][both] - M_ref[both], axis=-1)
     assert np.all(dist <= lanes["M_tol"][both]), "the float32 point lies within M_tol of the float64 one"
     assert np.all(lanes["conditioned"] <= 1) and lanes["conditioned"].sum() > 0.9 * SCENE_LANES
+
+
+@pytest.mark.parametrize("scene", SCENE_NAMES)
+def test_scene_cells_list_every_face_and_bound_its_heights(scene_data, scene):
+    """The start points' face cells in the file: the lines increase, every face is listed in
+    some cell, a continued list is chained to rows past the cells, and each row's height
+    range holds the vertex heights (along the projection axis) of the faces it lists."""
+    m, b = ex.load_scene(scene_data, scene)
+    p, lines, table, rows = b["scene"], b["cell_lines"]["x"], b["cell_faces"]["face"], b["cell_rows"]
+    nu, nv, width, w = (int(p[k][0]) for k in ("cell_nu", "cell_nv", "cell_width", "cell_axis_w"))
+    assert len(lines) == nu + nv + 2 and np.all(np.diff(lines[:nu + 1]) > 0) and np.all(np.diff(lines[nu + 1:]) > 0)
+    table = table.reshape(-1, width)
+    assert table.shape[0] == len(rows["more"]) == int(p["cell_rows"][0]) >= nu * nv
+    assert set(np.unique(table[table >= 0])) == set(range(int(p["n_faces"][0])))
+    more = rows["more"]
+    assert np.all((more == -1) | (more >= nu * nv))
+    z = b["vertices"]["position"][:, w][b["faces"]["v"]]
+    for r in range(table.shape[0]):
+        listed = table[r][table[r] >= 0]
+        if listed.size:
+            assert rows["z_lo"][r] <= z[listed].min() and z[listed].max() <= rows["z_hi"][r], r
+    assert p["cell_w_lo"][0] == b["vertices"]["position"][:, w].min()
+    assert m["version"]["format"] == ex.FORMAT_VERSION == 2
 
 
 def test_no_crossing_scene_has_lanes_that_cross_nothing(scene_data):
@@ -651,6 +678,13 @@ def test_the_building_blocks_check_what_export_checks(tmp_path):
     for lanes in (0, -3, 2**20 + 1):
         with pytest.raises(ValueError, match="lanes must be an integer"):
             export_scene(spec, lanes, 0)
+    from caustics_jax import Newton, Walk
+    for kwargs, match in [(dict(solver="trace"), "solver must be one of"),
+                          (dict(solver="newton", newton=Newton()), "GLSL Newton ports the one-step"),
+                          (dict(solver="newton", newton=Walk()), "newton must be None or a caustics_jax.Newton"),
+                          (dict(walk=Walk()), "no Newton fallback")]:
+        with pytest.raises(ValueError, match=match):
+            export_scene(spec, 8, 0, **kwargs)
     with pytest.raises(ValueError, match="seed"):
         ex.export(tmp_path, seed=2**64)
     manifest, raw = ex.export_kernel(ex.KERNELS["refract"], 8, 0)

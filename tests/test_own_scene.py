@@ -32,7 +32,8 @@ def test_export_scene_path_exports_that_scene_alone_and_conformance_runs_it(obj,
             "--floor-depth", "0.7", "--eta", "1.5"]
     assert cli.main(argv) == 0
     assert "scenes: my_pool" in capsys.readouterr().out
-    assert sorted(p.name for p in out.iterdir()) == ["caustics_scene.h", "my_pool.bin", "my_pool.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["caustics_scene.h", "my_pool.bin", "my_pool.json",
+                                                     "my_pool.newton.bin", "my_pool.newton.json"]
     m = json.loads((out / "my_pool.json").read_text())
     assert m["scene"] == "my_pool" and abs(m["eta"] - 1.5) < 1e-6 and "my pool.obj" in m["source"]
     assert "point light at [0.2, -0.1, 2.5]" in m["source"] and str(obj.parent) not in json.dumps(m)
@@ -41,7 +42,7 @@ def test_export_scene_path_exports_that_scene_alone_and_conformance_runs_it(obj,
     if code == 3:
         pytest.skip(f"no Vulkan toolchain or device: {captured.err.strip()}")
     assert code == 0, captured.err
-    assert "| my_pool | 64 (" in captured.out
+    assert "| my_pool | walk | 64 (" in captured.out and "| my_pool | newton | 64 (" in captured.out
 
 
 def test_a_scene_file_gives_the_options_and_flags_win_over_it(obj, tmp_path):
@@ -109,4 +110,4 @@ def test_a_sun_scene_exports_and_passes_conformance(obj, tmp_path, capsys):
     if code == 3:
         pytest.skip(f"no Vulkan toolchain or device: {captured.err.strip()}")
     assert code == 0, captured.err
-    assert "| my_pool | 64 (64) |" in captured.out
+    assert "| my_pool | walk | 64 (64) |" in captured.out and "| my_pool | newton | 64 (64) |" in captured.out

@@ -1,6 +1,7 @@
 """GLSL conformance on a Vulkan device (lavapipe in CI): every kernel's port reproduces the
-exported reference within the manifest tolerances, the start point, walk, D and irradiance
-pass on every exported scene, and a wrong line makes either fail.
+exported reference within the manifest tolerances, the start point (face cells), the walk
+and the one-step Newton, D and irradiance pass on every exported scene, and a wrong line
+makes either fail.
 
 Skips, saying what is missing, where glslangValidator, a C compiler, the Vulkan headers
 and loader or a Vulkan device are absent (`.ci/run` installs them on Debian).
@@ -97,7 +98,8 @@ def test_other_plausible_wrong_lines_fail_conformance(device, kernel, line, wron
 
 @pytest.fixture(scope="module")
 def scenes(device, tmp_path_factory):
-    """`(data_dir, work_dir, host, spv)`: every scene exported, the scene shader compiled once."""
+    """`(data_dir, work_dir, host, spv)`: every scene exported for both solvers, the scene
+    shader compiled once."""
     _, work, host = device
     data = tmp_path_factory.mktemp("scenes")
     ex.export(data, kernels=[], scenes=list(ex.SCENES), lanes=SCENE_LANES, seed=5)
@@ -105,14 +107,19 @@ def scenes(device, tmp_path_factory):
     return data, work, host, spv
 
 
+@pytest.mark.parametrize("solver", ["walk", "newton"])
 @pytest.mark.parametrize("scene", list(ex.SCENES))
-def test_glsl_walk_conforms_on_every_scene(scenes, scene):
-    """Start point, walk, D and irradiance: stable-lane status agreement >= 99.9%, points
-    within M_tol where both are FOUND, no FOUND point off by more than tol (float64 check),
-    D and E at the port's own points within their tolerances."""
+def test_glsl_solvers_conform_on_every_scene(scenes, scene, solver):
+    """Start point, walk or Newton, D and irradiance: stable-lane status agreement >= 99.9%,
+    points within M_tol where both are FOUND, no FOUND point off by more than tol (float64
+    check), D and E at the port's own points within their tolerances; the start points,
+    through the same face cells as the testbed's, agree on every lane."""
     data, work, host, spv = scenes
-    r = sc.run_scene(data, scene, work, host=host, spv=spv)
-    assert r["lanes"] == SCENE_LANES and r["device"]
+    r = sc.run_scene(data, ex.scene_stem(scene, solver), work, host=host, spv=spv)
+    assert r["lanes"] == SCENE_LANES and r["device"] and r["solver"] == solver
+    assert r["start_found_agreement"] == 1.0, r["start_found_agreement"]
+    if not scene.startswith("stress_"):  # (the stress scenes sit within float32's rounding by design)
+        assert r["conditioned_lanes"] >= 0.95 * SCENE_LANES, r["conditioned_lanes"]
     assert r["silent_wrong"] == 0, f"{scene}: lanes {r['silent_lanes']} FOUND with an angle error above tol"
     assert r["M_outside_tol"] == 0, f"{scene}: lanes {r['M_outside_lanes']} FOUND at another point"
     assert r["D"]["violations"] == 0 and r["E"]["violations"] == 0, (r["D"], r["E"])
@@ -136,8 +143,9 @@ def test_glsl_walk_conforms_on_every_scene(scenes, scene):
     ("walk.glsl", "s.f_exit = fx;", "s.f_exit = -fx;"),
     # the bracket end the cut replaces
     ("walk.glsl", "bool to_hi = cj_opposite(fm, s.f_lo);", "bool to_hi = cj_opposite(fm, s.f_hi);"),
-    # the grid's cell index transposed
-    ("start_point.glsl", "int f0 = 2 * (ij.y * n_cells.x + ij.x);", "int f0 = 2 * (ij.x * n_cells.y + ij.y);"),
+    # the DDA's next cell wall on the wrong side of the cell
+    ("start_point.glsl", "float x = cj_cell_line(k, clamp(i + (stp[k] > 0 ? 1 : 0), 0, n));",
+     "float x = cj_cell_line(k, clamp(i + (stp[k] > 0 ? 0 : 1), 0, n));"),
     # the Fresnel transmittance seen from the water side
     ("common.glsl", "cj_fresnel_reflectance(dot(w_L, n_s), 1.0 / eta)", "cj_fresnel_reflectance(dot(w_L, n_s), eta)"),
 ])
@@ -151,6 +159,29 @@ def test_a_broken_line_of_the_glsl_walk_fails_conformance(scenes, tmp_path, file
     path.write_text(text.replace(line, wrong))
     spv = conf.compile_shader(sc.scene_shader_source(shaders), tmp_path / "broken.spv")
     reports = [sc.run_scene(data, s, tmp_path / s, host=host, spv=spv) for s in ("wavy_steep", "lagoon")]
+    assert not all(r["passed"] for r in reports), [(r["scene"], r["status_agreement"]) for r in reports]
+
+
+@pytest.mark.parametrize("line, wrong", [
+    # the half vector's derivative with the wrong sign: steps go uphill
+    ("vec3 dh = -(dg - dot(h, dg) * h) * inv_g;", "vec3 dh = (dg - dot(h, dg) * h) * inv_g;"),
+    # Cramer's rule with the Jacobian transposed
+    ("vec2(c1.y * r.x - c1.x * r.y, c0.x * r.y - c0.y * r.x)",
+     "vec2(c1.y * r.x - c0.y * r.y, c0.x * r.y - c1.x * r.x)"),
+    # the re-projection's ray aimed from the tentative point instead of P
+    ("float s = ok ? dot(n, V[0] - P) / denom : 0.0;", "float s = ok ? dot(n, V[0] - T) / denom : 0.0;"),
+])
+def test_a_broken_line_of_the_glsl_newton_fails_conformance(scenes, tmp_path, line, wrong):
+    data, work, host, _ = scenes
+    shaders = tmp_path / "shaders"
+    shutil.copytree(conf.SHADER_DIR, shaders, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+    path = shaders / "newton.glsl"
+    text = path.read_text()
+    assert text.count(line) == 1, line
+    path.write_text(text.replace(line, wrong))
+    spv = conf.compile_shader(sc.scene_shader_source(shaders), tmp_path / "broken.spv")
+    reports = [sc.run_scene(data, ex.scene_stem(s, "newton"), tmp_path / s, host=host, spv=spv)
+               for s in ("wavy_steep", "lagoon")]
     assert not all(r["passed"] for r in reports), [(r["scene"], r["status_agreement"]) for r in reports]
 
 

@@ -351,7 +351,8 @@ def _export(args) -> int:
             print(f"caustics-jax export: {warning}", file=sys.stderr)
     try:
         written = export.export(args.out, kernels=kernels, count=args.count, seed=args.seed, scenes=scenes,
-                                lanes=opts["lanes"], extra_scenes=[own] if own is not None else [])
+                                lanes=opts["lanes"], extra_scenes=[own] if own is not None else [],
+                                solvers=args.solvers)
     except ValueError as exc:
         print(f"caustics-jax export: {exc}", file=sys.stderr)
         return 2
@@ -391,6 +392,9 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
                         "--floor-depth, --eta or --scene-file")
     _add_scene_args(p)
     p.add_argument("--lanes", type=int, default=None, help="lanes per scene (default: 256)")
+    p.add_argument("--solvers", nargs="+", default=["walk", "newton"], choices=["walk", "newton"],
+                   help="solvers whose scene files are written: <scene>.json (walk), <scene>.newton.json (one-step "
+                        "Newton) (default: both)")
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes (default: %(default)s)")
 
 

@@ -23,13 +23,13 @@ One concept per module:
 
 Whole scenes, next to the kernels (docs/export.md "Scenes"):
 
-- `scene_records`: the four std430 buffers of a scene file (`BUFFERS`, `pack_scene`,
+- `scene_records`: the seven std430 buffers of a scene file (`BUFFERS`, `pack_scene`,
   `read_scene`, `load_scene`, `scene_c_header`); numpy only.
 - `scene_registry`: `SceneSpec`, `SceneData`, `SCENES` and `register_scene`.
 - `scene_cases`: the exported scenes (pools, lagoon, jittered mesh, lanes crossing no
   surface, stress categories).
-- `scene_writer`: `export_scene` (the float32 walk's expected lanes, the float64 reference,
-  tolerances) and `write_scenes`.
+- `scene_writer`: `export_scene` (the float32 walk's or one-step Newton's expected lanes,
+  the float64 reference, tolerances), `scene_stem` and `write_scenes`.
 """
 
 # isort: off
@@ -62,7 +62,7 @@ from .registry import KERNELS, Kernel, register
 from .scene_cases import mesh_file_scene, scene_name
 from .scene_records import BUFFER_ALIGNMENT, BUFFERS, load_scene, pack_scene, read_scene, scene_c_header
 from .scene_registry import SCENES, SceneData, SceneSpec, register_scene
-from .scene_writer import export_scene, write_scenes
+from .scene_writer import NEWTON, export_scene, scene_stem, write_scenes
 from .tolerance import (
     AUDIT_FILE,
     F64_BUDGET,
@@ -113,6 +113,7 @@ __all__ = [
     "load_audit",
     "load_scene",
     "mesh_file_scene",
+    "NEWTON",
     "pack_records",
     "pack_scene",
     "read_records",
@@ -123,6 +124,7 @@ __all__ = [
     "scene_c_header",
     "scene_cases",
     "scene_name",
+    "scene_stem",
     "ulp_distance",
     "write_scenes",
 ]

@@ -161,16 +161,18 @@ def _selection(arg: str, value, registry: dict, what: str) -> list[str]:
 
 
 def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0,
-           scenes: list[str] | None = (), lanes: int = 256, extra_scenes=()) -> list[Path]:
+           scenes: list[str] | None = (), lanes: int = 256, extra_scenes=(), solvers=("walk", "newton")) -> list[Path]:
     """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h`, and
-    `<scene>.json`, `<scene>.bin` per scene and `caustics_scene.h`, into `out_dir`.
+    `<scene>.json`, `<scene>.bin` per scene (the walk's; `<scene>.newton.json` and `.bin` the
+    one-step Newton's) and `caustics_scene.h`, into `out_dir`.
 
     `kernels`: names of `KERNELS` (None: all; empty: none; one string: that kernel; a
     name given twice is exported once). `count` random and planted records per kernel (a
     quarter planted), plus each kernel's fixed adversarial cases. `scenes`: names of
     `SCENES` (None: all; default none; as `kernels`), each with `lanes` lanes; `extra_scenes`:
     further scenes as `SceneSpec`s (a mesh file's, `scene_cases.mesh_file_scene`)
-    (`scene_writer.export_scene`). Same arguments, same bytes. Raises ValueError, before
+    (`scene_writer.export_scene`); `solvers`: which solvers' scene files, of "walk" and
+    "newton". Same arguments, same bytes. Raises ValueError, before
     any work, on unknown kernel or scene names, a count below 4, lanes outside
     [1, 2^20], a seed outside [0, 2^63 - 1], or an `out_dir` that is empty, a file, lies below a file
     or cannot be created or written.
@@ -184,6 +186,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     if not all(isinstance(x, SceneSpec) for x in extra):
         raise ValueError(f"extra_scenes must be export SceneSpecs (scene_cases.mesh_file_scene), got {extra!r}")
     specs = [SCENES[n] for n in scene_names] + extra
+    solver_names = _selection("solvers", solvers, dict.fromkeys(("walk", "newton")), "solver")
     if len({sp.name for sp in specs}) < len(specs):
         raise ValueError(f"two exported scenes share a name: {[sp.name for sp in specs]} (rename the mesh file)")
     count = check_int("count", count, 4, MAX_INT32)  # (as export_kernel and export_scene check them)
@@ -206,5 +209,5 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
         (out / "caustics_records.h").write_text(c_header([KERNELS[n] for n in names]))
         written.append(out / "caustics_records.h")
     if specs:
-        written += write_scenes(out, specs, int(lanes), int(seed))
+        written += write_scenes(out, specs, int(lanes), int(seed), tuple(solver_names))
     return written

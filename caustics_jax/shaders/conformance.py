@@ -10,7 +10,7 @@ pass rate against the manifest tolerances).
 
     python -m caustics_jax.shaders.conformance DATA_DIR [--kernels ...] [--scenes ...] [--json out.json]
 
-Scenes (start point, walk, D, irradiance) are judged by `scene_conformance`.
+Scenes (start point, walk or one-step Newton, D, irradiance) are judged by `scene_conformance`.
 
 Needs `glslangValidator` (Debian `glslang-tools`), a C compiler, the Vulkan headers and
 loader (`libvulkan-dev`, `libvulkan1`) and a Vulkan driver (`mesa-vulkan-drivers` gives
@@ -130,18 +130,21 @@ def main(argv=None, prog: str = "python -m caustics_jax.shaders.conformance") ->
     p.add_argument("data", help="directory written by `caustics-jax export`")
     p.add_argument("--kernels", nargs="+", default=None, choices=sorted(ex.KERNELS))
     p.add_argument("--scenes", nargs="+", default=None, metavar="SCENE",
-                   help="scenes exported in DATA (built-in or your own mesh's; default: every one there)")
+                   help="scenes exported in DATA (built-in or your own mesh's; a name runs every solver's file "
+                        "of that scene, a stem such as lagoon.newton one file; default: every one there)")
     p.add_argument("--json", default=None, help="write the reports as JSON here")
     args = p.parse_args(argv)
     data = Path(args.data)
     exported = sc.exported_scenes(data)  # by manifest: a mesh file's scene has the file's name
-    missing = [s for s in args.scenes or [] if s not in exported]
+    chosen = {s: [e for e in exported if e == s or e.split(".")[0] == s] for s in args.scenes or []}
+    missing = [s for s, stems in chosen.items() if not stems]
     if missing:
         print(f"{prog}: no exported scene {missing} in {data} (exported: {', '.join(exported) or 'none'})",
               file=sys.stderr)
         return 2
     kernels = args.kernels if args.kernels or args.scenes else [k for k in ex.KERNELS if (data / f"{k}.json").exists()]
-    scenes = args.scenes if args.scenes or args.kernels else exported
+    selected = list(dict.fromkeys(stem for stems in chosen.values() for stem in stems))
+    scenes = selected if args.scenes else ([] if args.kernels else exported)
     if not kernels and not scenes:
         print(f"{prog}: no exported kernels or scenes in {data}", file=sys.stderr)
         return 2
@@ -161,8 +164,8 @@ def main(argv=None, prog: str = "python -m caustics_jax.shaders.conformance") ->
         print(sc.format_scene_table(scene_reports))
     if args.json:
         Path(args.json).write_text(json.dumps({"kernels": reports, "scenes": scene_reports}, indent=1) + "\n")
-    failed = [r["kernel"] for r in reports if r["pass_rate"] < 1] + [r["scene"] for r in scene_reports
-                                                                     if not r["passed"]]
+    failed = [r["kernel"] for r in reports if r["pass_rate"] < 1] + [f"{r['scene']} ({r['solver']})"
+                                                                     for r in scene_reports if not r["passed"]]
     if failed:
         print(f"FAILED: {failed}", file=sys.stderr)
     return 1 if failed else 0

@@ -11,6 +11,15 @@
  * default 1) to stdout. Exit status 3 means "no Vulkan device" (the harness skips), any
  * other non-zero status an error.
  *
+ *   cj_vk_host --list
+ *
+ * prints one line per Vulkan device: index, type (integrated, discrete, virtual, cpu,
+ * other), vendor and device IDs, driver version, API version, subgroup size (0 when the
+ * device is Vulkan 1.0) and name, tab-separated. CJ_VK_DEVICE=<index> picks a device by
+ * index, CJ_VK_DEVICE_NAME=<text> the first whose name contains the text; the default is the
+ * first device with a compute queue. A run prints the device's name first, then
+ * "device_type", "driver_version" and the timings.
+ *
  * Host-visible, host-coherent memory only: on lavapipe all memory is, and for a test
  * harness the staging copy of a discrete GPU is not worth its code.
  */
@@ -85,7 +94,57 @@ static int make_buffer(VkPhysicalDevice phys, VkDevice dev, VkDeviceSize size, V
     return 0;
 }
 
+static const char *type_name(VkPhysicalDeviceType t) {
+    switch (t) {
+    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU: return "integrated";
+    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU: return "discrete";
+    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU: return "virtual";
+    case VK_PHYSICAL_DEVICE_TYPE_CPU: return "cpu";
+    default: return "other";
+    }
+}
+
+/* --list: the devices, one line each (see the header). Exit status 3 without any. */
+static int list_devices(void) {
+    VkApplicationInfo app = {VK_STRUCTURE_TYPE_APPLICATION_INFO};
+    app.pApplicationName = "caustics_jax device list";
+    app.apiVersion = VK_API_VERSION_1_1;
+    VkInstanceCreateInfo ici = {VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+    ici.pApplicationInfo = &app;
+    VkInstance inst;
+    if (vkCreateInstance(&ici, NULL, &inst) != VK_SUCCESS) {
+        app.apiVersion = VK_API_VERSION_1_0; /* a 1.0 loader: no subgroup query */
+        if (vkCreateInstance(&ici, NULL, &inst) != VK_SUCCESS) {
+            fprintf(stderr, "cj_vk_host: no Vulkan instance (no loader or no driver)\n");
+            return 3;
+        }
+    }
+    uint32_t n_phys = 0;
+    vkEnumeratePhysicalDevices(inst, &n_phys, NULL);
+    VkPhysicalDevice physs[16];
+    if (n_phys > 16) n_phys = 16;
+    vkEnumeratePhysicalDevices(inst, &n_phys, physs);
+    for (uint32_t d = 0; d < n_phys; ++d) {
+        VkPhysicalDeviceProperties props;
+        vkGetPhysicalDeviceProperties(physs[d], &props);
+        uint32_t subgroup = 0;
+        if (app.apiVersion >= VK_API_VERSION_1_1 && props.apiVersion >= VK_API_VERSION_1_1) {
+            VkPhysicalDeviceSubgroupProperties sub = {VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
+            VkPhysicalDeviceProperties2 p2 = {VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2};
+            p2.pNext = &sub;
+            vkGetPhysicalDeviceProperties2(physs[d], &p2);
+            subgroup = sub.subgroupSize;
+        }
+        printf("%u\t%s\t0x%04x\t0x%04x\t%u\t%u.%u.%u\t%u\t%s\n", d, type_name(props.deviceType), props.vendorID,
+               props.deviceID, props.driverVersion, VK_VERSION_MAJOR(props.apiVersion),
+               VK_VERSION_MINOR(props.apiVersion), VK_VERSION_PATCH(props.apiVersion), subgroup, props.deviceName);
+    }
+    vkDestroyInstance(inst, NULL);
+    return n_phys ? 0 : 3;
+}
+
 int main(int argc, char **argv) {
+    if (argc == 2 && strcmp(argv[1], "--list") == 0) return list_devices();
     if (argc < 6 || argc > 6 + MAX_BUFFERS - 2) {
         fprintf(stderr, "usage: %s SHADER.spv IN.bin OUT.bin COUNT STRIDE [EXTRA.bin ...] (at most %d extra)\n",
                 argv[0], MAX_BUFFERS - 2);
@@ -140,12 +199,21 @@ int main(int argc, char **argv) {
     if (n_phys > 16) n_phys = 16;
     vkEnumeratePhysicalDevices(inst, &n_phys, physs);
 
-    /* First device with a compute queue; CJ_VK_DEVICE=<index> picks another. */
+    /* First device with a compute queue; CJ_VK_DEVICE=<index> or CJ_VK_DEVICE_NAME=<text>
+       picks another. */
     const char *want = getenv("CJ_VK_DEVICE");
+    const char *want_name = getenv("CJ_VK_DEVICE_NAME");
+    if (want && !*want) want = NULL;
+    if (want_name && !*want_name) want_name = NULL;
     VkPhysicalDevice phys = VK_NULL_HANDLE;
     uint32_t family = 0;
     for (uint32_t d = 0; d < n_phys && phys == VK_NULL_HANDLE; ++d) {
         if (want && (uint32_t)atoi(want) != d) continue;
+        if (want_name) {
+            VkPhysicalDeviceProperties named;
+            vkGetPhysicalDeviceProperties(physs[d], &named);
+            if (!strstr(named.deviceName, want_name)) continue;
+        }
         uint32_t n_fam = 0;
         vkGetPhysicalDeviceQueueFamilyProperties(physs[d], &n_fam, NULL);
         VkQueueFamilyProperties fams[32];
@@ -327,8 +395,9 @@ int main(int argc, char **argv) {
     }
     fclose(out);
     vkUnmapMemory(dev, mems[1]);
-    printf("%s\ndispatch_seconds %.9f %.9f\ndispatch_cpu_seconds %.9f %.9f\n", props.deviceName, seconds[0],
-           seconds[repeat / 2], cpu[0], cpu[repeat / 2]);
+    printf("%s\ndevice_type %s\ndriver_version %u\ndispatch_seconds %.9f %.9f\ndispatch_cpu_seconds %.9f %.9f\n",
+           props.deviceName, type_name(props.deviceType), props.driverVersion, seconds[0], seconds[repeat / 2], cpu[0],
+           cpu[repeat / 2]);
 
     vkDestroyFence(dev, fence, NULL);
     vkDestroyCommandPool(dev, cmd_pool, NULL);

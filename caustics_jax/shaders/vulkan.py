@@ -80,12 +80,33 @@ def host_output(stdout: str) -> tuple[str, dict]:
     dispatch (wall time of submit to fence; the host process's CPU time over it, all threads,
     which is the shader's own CPU time on a CPU driver such as lavapipe)."""
     lines = stdout.strip().splitlines()
-    timing = {"wall": None, "cpu": None}
+    timing = {"wall": None, "cpu": None, "device_type": None, "driver_version": None}
     for line in lines[1:]:
         key, *values = line.split()
         if key in ("dispatch_seconds", "dispatch_cpu_seconds") and values:
             timing["wall" if key == "dispatch_seconds" else "cpu"] = float(values[0])
+        elif key in ("device_type", "driver_version") and values:
+            timing[key] = values[0]
     return (lines[0] if lines else ""), timing
+
+
+def list_devices(host: Path) -> list[dict]:
+    """The Vulkan devices the host sees (`cj_vk_host --list`): per device `index`, `type`
+    ("discrete", "integrated", "virtual", "cpu", "other"), `vendor_id`, `device_id`,
+    `driver_version`, `api_version`, `subgroup_size` (0: unknown) and `name`. Unavailable
+    when there is no Vulkan instance or device."""
+    proc = subprocess.run([str(host), "--list"], capture_output=True, text=True)
+    if proc.returncode == 3:
+        raise Unavailable(f"no Vulkan device: {proc.stderr.strip()}")
+    if proc.returncode != 0:
+        raise RuntimeError(f"Vulkan host --list failed ({proc.returncode}): {proc.stderr.strip()}")
+    keys = ("index", "type", "vendor_id", "device_id", "driver_version", "api_version", "subgroup_size", "name")
+    devices = []
+    for line in proc.stdout.strip().splitlines():
+        d = dict(zip(keys, line.split("\t", len(keys) - 1), strict=True))
+        d["index"], d["subgroup_size"] = int(d["index"]), int(d["subgroup_size"])
+        devices.append(d)
+    return devices
 
 
 def run_host(host: Path, spv: Path, records_in: Path, records_out: Path, count: int, stride: int,
