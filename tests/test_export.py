@@ -329,7 +329,8 @@ def test_a_name_given_twice_is_exported_once_and_one_string_is_one_name(tmp_path
     assert ex.c_header([ex.KERNELS["fresnel"]] * 2).count("typedef struct cj_fresnel_record") == 1
     seen = []
     monkeypatch.setattr(ex.scene_writer, "write_scenes",
-                        lambda out, specs, lanes, seed, solvers: seen.append(([s.name for s in specs], solvers)) or [])
+                        lambda out, specs, lanes, seed, solvers, newton: seen.append(([s.name for s in specs], solvers))
+                        or [])
     ex.export(tmp_path / "s", kernels=[], scenes="flat_pool")
     ex.export(tmp_path / "s", kernels=[], scenes=("lagoon", "flat_pool", "lagoon"), solvers="newton")
     assert seen == [(["flat_pool"], ("walk", "newton")), (["lagoon", "flat_pool"], ("newton",))]

@@ -162,6 +162,24 @@ def test_a_broken_line_of_the_glsl_walk_fails_conformance(scenes, tmp_path, file
     assert not all(r["passed"] for r in reports), [(r["scene"], r["status_agreement"]) for r in reports]
 
 
+def test_the_glsl_newton_with_cycles_mnee_step_control_conforms(scenes, tmp_path):
+    """`initial_step=0.1` (Cycles' MNEE step control, `newton-hv-step-gentle`), exported with
+    `--newton-initial-step 0.1`: the shader reads it from the scene record and agrees; the
+    gentle first step costs iterations on the pool against the full step."""
+    from caustics_jax import Newton
+
+    data, work, host, spv = scenes
+    out = tmp_path / "mnee"
+    ex.export(out, kernels=[], scenes=["wavy_steep"], lanes=SCENE_LANES, seed=5, solvers=["newton"],
+              newton=Newton(stepping="one_step", constraint="half_vector", initial_step=0.1))
+    m, b = ex.load_scene(out, "wavy_steep.newton")
+    assert m["options"]["initial_step"] == 0.1 and abs(b["scene"]["initial_step"][0] - 0.1) < 1e-7
+    r = sc.run_scene(out, "wavy_steep.newton", work / "mnee", host=host, spv=spv)
+    assert r["passed"] and r["status_agreement"] >= 0.999, (r["disagreements"], r["D"], r["E"])
+    full = sc.run_scene(data, "wavy_steep.newton", work, host=host, spv=spv)
+    assert r["iterations_port"] > full["iterations_port"]
+
+
 @pytest.mark.parametrize("line, wrong", [
     # the half vector's derivative with the wrong sign: steps go uphill
     ("vec3 dh = -(dg - dot(h, dg) * h) * inv_g;", "vec3 dh = (dg - dot(h, dg) * h) * inv_g;"),

@@ -352,7 +352,7 @@ def _export(args) -> int:
     try:
         written = export.export(args.out, kernels=kernels, count=args.count, seed=args.seed, scenes=scenes,
                                 lanes=opts["lanes"], extra_scenes=[own] if own is not None else [],
-                                solvers=args.solvers)
+                                solvers=args.solvers, newton=_newton_options(args.newton_initial_step))
     except ValueError as exc:
         print(f"caustics-jax export: {exc}", file=sys.stderr)
         return 2
@@ -360,6 +360,14 @@ def _export(args) -> int:
     print(f"wrote {len(written)} files to {args.out} (kernels: {', '.join(kernels) or 'none'}; "
           f"scenes: {', '.join(names) or 'none'})")
     return 0
+
+
+def _newton_options(initial_step: float):
+    """The exported Newton: `export.NEWTON` with the first step size `initial_step` (1: full
+    steps, `newton-hv-step`; 0.1: Cycles' MNEE step control)."""
+    from ..solvers import Newton
+
+    return Newton(stepping="one_step", constraint="half_vector", initial_step=initial_step)
 
 
 def _conformance(args) -> int:
@@ -395,6 +403,9 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--solvers", nargs="+", default=["walk", "newton"], choices=["walk", "newton"],
                    help="solvers whose scene files are written: <scene>.json (walk), <scene>.newton.json (one-step "
                         "Newton) (default: both)")
+    p.add_argument("--newton-initial-step", type=float, default=1.0, metavar="BETA",
+                   help="the exported Newton's first step size, in (0, 1]: 1 full Newton steps (newton-hv-step), "
+                        "0.1 Cycles' MNEE step control (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="generator seed: same seed, same bytes (default: %(default)s)")
 
 

@@ -253,8 +253,9 @@ def _stats(x: np.ndarray) -> dict:
 NEWTON = Newton(stepping="one_step", constraint="half_vector")
 
 
-def _check_method(solver: str, walk, newton):
-    """The solver object of a scene file (`export_scene`'s arguments), or ValueError."""
+def check_scene_solver(solver: str, walk=None, newton=None):
+    """The solver object of a scene file from `export_scene`'s arguments (`solver` "walk"
+    or "newton", the options `walk` or `newton`, None for the defaults), or ValueError."""
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got {solver!r}")
     if solver == "walk":
@@ -354,7 +355,7 @@ def export_scene(spec: SceneSpec, lanes: int, seed: int, walk: Walk | None = Non
         raise ValueError(f"spec must be an export SceneSpec (export.SCENES[name]), got {type(spec).__name__}")
     lanes = check_int("lanes", lanes, 1, 2**20)
     seed = check_int("seed", seed, 0, 2**63 - 1)
-    method = _check_method(solver, walk, newton)
+    method = check_scene_solver(solver, walk, newton)
     is_walk = solver == "walk"
     rng = np.random.default_rng([seed, zlib.crc32(spec.name.encode())])
     data = spec.build(rng, lanes)
@@ -590,11 +591,11 @@ def scene_stem(scene: str, solver: str = "walk") -> str:
     return scene if solver == "walk" else f"{scene}.{solver}"
 
 
-def write_scenes(out, specs, lanes: int, seed: int, solvers=SOLVER_NAMES) -> list:
+def write_scenes(out, specs, lanes: int, seed: int, solvers=SOLVER_NAMES, newton: Newton | None = None) -> list:
     """Write `<stem>.json` and `<stem>.bin` per scene of `specs` (`SceneSpec`s: registered
     ones or a mesh file's, `scene_cases.mesh_file_scene`) and per solver of `solvers`
-    (`scene_stem`), and `caustics_scene.h`, into the existing directory `out`; returns the
-    paths written."""
+    (`scene_stem`; the Newton's options `newton`, default `NEWTON`), and `caustics_scene.h`,
+    into the existing directory `out`; returns the paths written."""
     import json
     from pathlib import Path
 
@@ -605,7 +606,7 @@ def write_scenes(out, specs, lanes: int, seed: int, solvers=SOLVER_NAMES) -> lis
     for spec in specs:
         for solver in solvers:
             stem = scene_stem(spec.name, solver)
-            manifest, raw = export_scene(spec, lanes, seed, solver=solver)
+            manifest, raw = export_scene(spec, lanes, seed, solver=solver, newton=newton)
             (out / f"{stem}.json").write_text(json.dumps(manifest, indent=1) + "\n")
             (out / f"{stem}.bin").write_bytes(raw)
             written += [out / f"{stem}.json", out / f"{stem}.bin"]

@@ -161,7 +161,8 @@ def _selection(arg: str, value, registry: dict, what: str) -> list[str]:
 
 
 def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: int = 0,
-           scenes: list[str] | None = (), lanes: int = 256, extra_scenes=(), solvers=("walk", "newton")) -> list[Path]:
+           scenes: list[str] | None = (), lanes: int = 256, extra_scenes=(), solvers=("walk", "newton"),
+           newton=None) -> list[Path]:
     """Write `<kernel>.json`, `<kernel>.bin` per kernel and `caustics_records.h`, and
     `<scene>.json`, `<scene>.bin` per scene (the walk's; `<scene>.newton.json` and `.bin` the
     one-step Newton's) and `caustics_scene.h`, into `out_dir`.
@@ -172,13 +173,15 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     `SCENES` (None: all; default none; as `kernels`), each with `lanes` lanes; `extra_scenes`:
     further scenes as `SceneSpec`s (a mesh file's, `scene_cases.mesh_file_scene`)
     (`scene_writer.export_scene`); `solvers`: which solvers' scene files, of "walk" and
-    "newton". Same arguments, same bytes. Raises ValueError, before
+    "newton"; `newton`: the Newton's options (default `scene_writer.NEWTON`; a
+    `Newton(stepping="one_step", constraint="half_vector", initial_step=0.1)` is Cycles' MNEE
+    step control). Same arguments, same bytes. Raises ValueError, before
     any work, on unknown kernel or scene names, a count below 4, lanes outside
     [1, 2^20], a seed outside [0, 2^63 - 1], or an `out_dir` that is empty, a file, lies below a file
     or cannot be created or written.
     """
     from .scene_registry import SCENES, SceneSpec
-    from .scene_writer import write_scenes
+    from .scene_writer import check_scene_solver, write_scenes
 
     names = _selection("kernels", kernels, KERNELS, "kernel")
     scene_names = _selection("scenes", scenes, SCENES, "scene")
@@ -187,6 +190,8 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
         raise ValueError(f"extra_scenes must be export SceneSpecs (scene_cases.mesh_file_scene), got {extra!r}")
     specs = [SCENES[n] for n in scene_names] + extra
     solver_names = _selection("solvers", solvers, dict.fromkeys(("walk", "newton")), "solver")
+    if "newton" in solver_names:
+        check_scene_solver("newton", newton=newton)  # before any work
     if len({sp.name for sp in specs}) < len(specs):
         raise ValueError(f"two exported scenes share a name: {[sp.name for sp in specs]} (rename the mesh file)")
     count = check_int("count", count, 4, MAX_INT32)  # (as export_kernel and export_scene check them)
@@ -209,5 +214,5 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
         (out / "caustics_records.h").write_text(c_header([KERNELS[n] for n in names]))
         written.append(out / "caustics_records.h")
     if specs:
-        written += write_scenes(out, specs, int(lanes), int(seed), tuple(solver_names))
+        written += write_scenes(out, specs, int(lanes), int(seed), tuple(solver_names), newton)
     return written
