@@ -32,7 +32,7 @@ test: $(STAMP)
 
 # Every experiment's figure and JSON on the CPU (an hour or more: the start-point sweep
 # builds a 1M-triangle scene, the throughput benchmark alone takes ~10 minutes). The GLSL
-# walk against the JAX walk needs a Vulkan device: `make figures-vulkan`.
+# walk and Newton against the JAX ones need a Vulkan device: `make figures-vulkan`.
 figures: $(STAMP)
 	$(PY) -m experiments.conic_curve
 	$(PY) -m experiments.float32_audit
@@ -51,7 +51,8 @@ figures: $(STAMP)
 	$(PY) -m experiments.compile_options
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
-# The GLSL walk on lavapipe (or another Vulkan device) against the JAX walk (docs/export.md).
+# The GLSL walk and one-step Newton on lavapipe (or another Vulkan device) against the JAX
+# ones (docs/export.md); `python tools/gpu_recipe.py` does it on a Vulkan GPU.
 figures-vulkan: $(STAMP)
 	$(PY) -m experiments.glsl_throughput
 

@@ -21,7 +21,8 @@
 # and as wall time. Divergence: lavapipe runs a subgroup of `subgroup_size` consecutive
 # lanes in lockstep, so a subgroup costs its slowest lane's iterations; the table gives the
 # iterations per lane and the mean over subgroups of their largest (the lanes are in the
-# export's order, shuffled cases: a renderer's screen-ordered lanes are more coherent).
+# export's order, shuffled cases: a renderer's screen-ordered lanes are more coherent),
+# also for the subgroups of 32 and 64 lanes of GPUs.
 #
 # Run: `python -m experiments.glsl_throughput` (needs glslangValidator, a C compiler and a
 # Vulkan driver; writes `figures/glsl_throughput.png` and `.json`, prints a table).
@@ -50,10 +51,14 @@ from experiments.common import ROOT, parse_args, use_agg, write_json
 
 use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 
 FIG = ROOT / "figures" / "glsl_throughput.png"
 SCENE_NAMES = ("wavy_gentle", "wavy_steep", "lagoon", "wavy_jittered")
 SOLVERS = {"walk": Walk(fallback="none"), "newton": NEWTON}
+#: Subgroup widths whose lockstep iteration cost is reported besides the device's own (GPU
+#: subgroups: 32 on NVIDIA, 32 or 64 on AMD).
+LOCKSTEP_WIDTHS = (8, 32, 64)
 
 
 # %%
@@ -152,6 +157,7 @@ def main(argv=None):
                        "found_port": rep["found_port"], "found_testbed": rep["found_testbed"],
                        "iterations_per_lane": float(np.mean(it_port)),
                        "iterations_per_subgroup_lane": lockstep_iterations(it_port, width),
+                       "iterations_lockstep": {str(w): lockstep_iterations(it_port, w) for w in LOCKSTEP_WIDTHS},
                        "crossed_per_lane": float(np.mean(r["buffers"]["lanes"]["crossed"])),
                        "general_mesh": not scene_rec["has_grid"][0],
                        "start_points": f"face cells ({'grid' if scene_rec['cell_kind'][0] == 0 else 'bins'}, "
@@ -198,7 +204,7 @@ def plot(result, path: Path = FIG) -> None:
     scenes = list(result["ratios"])
     x = np.arange(len(scenes))
     by = {(r["scene"], r["solver"]): r for r in rows}
-    fig, ax = plt.subplots(figsize=(8.5, 4.4))
+    fig, ax = plt.subplots(figsize=(8.5, 4.8))
     bars = [("jax", "walk", "JAX walk (XLA:CPU)", "#9ecae1"), ("jax", "newton", "JAX one-step Newton", "#fdae6b"),
             ("glsl", "walk", "GLSL walk (lavapipe)", "#3182bd"), ("glsl", "newton", "GLSL one-step Newton", "#e6550d")]
     for k, (side, solver, label, color) in enumerate(bars):
@@ -207,12 +213,16 @@ def plot(result, path: Path = FIG) -> None:
     device = rows[0]["device"] if rows else ""
     ax.set_xticks(x, [f"{s}\n({by[s, 'walk']['start_points']})" for s in scenes], fontsize=8)
     ax.set_yscale("log")
+    top = max(max(r["jax_cpu_us_per_lane"], r["glsl_cpu_us_per_lane"]) for r in rows)
+    ax.set_ylim(1, 1.3 * top)
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.set_ylabel("CPU time per lane (us, all threads)\nstart point + solver + D + E")
     ax.set_title(f"Walk against one-step Newton per receiver, float32, {result['lanes']} lanes per scene\n"
                  f"GLSL on {device}; {result['cpu_count']} CPU cores, median of {result['rounds']} rounds",
                  fontsize=10)
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
+    ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.16))
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)

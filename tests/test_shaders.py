@@ -268,3 +268,30 @@ def test_a_port_masks_non_finite_inputs_as_its_kernel(device, tmp_path, kernel):
     (tmp_path / f"{kernel}.bin").write_bytes(pack_records(spec, values))
     report = conf.run_kernel(tmp_path, kernel, work, host=host)
     assert report["pass_rate"] == 1.0, (kernel, report["fields"], report["failures"][:10])
+
+
+def test_the_gpu_recipe_lists_the_devices_and_skips_without_a_gpu(device, tmp_path, capsys):
+    """`tools/gpu_recipe.py`: the devices listed with type, driver and subgroup size; a CPU
+    driver (lavapipe) is never picked by default, a name that matches nothing skips cleanly,
+    and a GPU would be picked before a CPU driver."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "tools" / "gpu_recipe.py"
+    spec = importlib.util.spec_from_file_location("gpu_recipe", path)
+    recipe = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(recipe)
+    _, work, host = device
+    devices = vk.list_devices(host)
+    assert devices and all(d["name"] and d["type"] in ("integrated", "discrete", "virtual", "cpu", "other")
+                           for d in devices)
+    gpu = {"index": 9, "type": "discrete", "name": "Some GPU"}
+    assert recipe.pick([{"index": 0, "type": "cpu", "name": "llvmpipe"}, gpu], None) is gpu
+    assert recipe.pick([{"index": 0, "type": "cpu", "name": "llvmpipe"}], None) is None
+    assert recipe.main(["--out", str(tmp_path), "--device", "no such device"]) == 0
+    assert "skipped, no device named like 'no such device'" in capsys.readouterr().out
+    listed = json.loads((tmp_path / "devices.json").read_text())
+    assert listed["chosen"] is None and listed["devices"] == devices
+    if all(d["type"] == "cpu" for d in devices):
+        assert recipe.main(["--out", str(tmp_path)]) == 0
+        assert "skipped, no GPU" in capsys.readouterr().out

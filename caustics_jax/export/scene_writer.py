@@ -1,20 +1,23 @@
-"""Writing a scene file: surface, lanes, the float32 walk's per-lane results and the float64
-reference (DESIGN.md "Reference data for shader tests"; docs/export.md "Scenes").
+"""Writing a scene file: surface, face cells, lanes, the float32 solver's per-lane results and
+the float64 reference (DESIGN.md "Reference data for shader tests"; docs/export.md "Scenes").
 
-`export_scene(spec, lanes, seed)` builds the scene (`scene_registry.SceneData`), rounds the
-surface and lanes to float32 once, and on exactly those values runs
+`export_scene(spec, lanes, seed, solver=...)` builds the scene (`scene_registry.SceneData`),
+rounds the surface and lanes to float32 once, and on exactly those values runs
 
-- the start point and the curve walk in float32 (`solve(..., method=Walk(fallback="none"), features=None)`:
-  the general walk, no closed form, as a shader runs it; seed 001 §3.4), then `D` (seed 001
-  eq. 26-33) and the irradiance (eq. 25, math.md §6) at its point: the `output` fields a
-  port must reproduce;
-- the same walk in float64 on the float32 values cast exactly to float64: the `reference`
+- the start point through the face cells written to the file, and the solver in float32:
+  the curve walk (`solve(..., method=Walk(fallback="none"), features=None)`: the general
+  walk, no closed form, as a shader runs it; seed 001 §3.4) or the one-step Newton on the
+  half-vector constraint (`NEWTON`, `newton-hv-step`); then `D` (seed 001 eq. 26-33) and the
+  irradiance (eq. 25, math.md §6) at its point: the `output` fields a port must reproduce;
+- the same solver in float64 on the float32 values cast exactly to float64: the `reference`
   fields (`M_ref` + `M_ref_lo` is the float64 point in two float32 parts), and the
   refraction-angle error of that point (`testing.oracle.refraction_angle_error`);
-- per lane, the distance along the curve within which two points that both satisfy the
-  acceptance test `|f| <= tol` can lie (`M_tol`, from `df/ds` at the float32 point,
-  evaluated in float64), and per scene the measured float32 error of `D` and `E` at the
-  float32 point (float32 against float64, same point): the tolerances of conformance.
+- the tolerances of conformance: per lane the distance within which two accepted points can
+  lie (`M_tol`: the walk's from `df/ds` along the curve at the float32 point, in float64;
+  the Newton's measured, from the float32 points' distance to the float64 roots they polish
+  to), the float32 error of `D` and `E` near the lane's point (`D_err`, `E_err`), per scene
+  the measured float32 error of `D` and `E` at the testbed's points, and which lanes float32
+  decides (`conditioned`).
 
 Same arguments, same bytes (the tolerance digits are measured on the exporting machine).
 """

@@ -1,14 +1,15 @@
-"""Conformance of the GLSL start point, walk, D and irradiance against the exported scenes.
+"""Conformance of the GLSL start point, walk or one-step Newton, D and irradiance against the
+exported scene files (the walk's `<scene>` and the Newton's `<scene>.newton`).
 
-The scene shader is `#version 450` + the four structs of the scene file (generated from
+The scene shader is `#version 450` + the seven structs of the scene file (generated from
 `export.scene_records`, the layout that wrote the `.bin` and `caustics_scene.h`) + the
-buffer bindings (0 lanes in, 1 lanes out, 2 scene parameters, 3 vertices, 4 faces) +
-`common.glsl`, `scene_mesh.glsl`, `start_point.glsl`, `arcs.glsl`, `walk.glsl`,
-`scene_lane.glsl`. One SPIR-V serves every scene. The host (`host.c`) runs it once per
+buffer bindings (0 lanes in, 1 lanes out, then `BINDINGS`: scene parameters, vertices,
+faces, cell lines, cell faces, cell rows) + `SCENE_FILES`. One SPIR-V serves every scene
+and both solvers (`cj_scene.solver`). The host (`host.c`) runs it once per
 lane with every `output` and `reference` field of the lanes hidden (0xFF), and
 `scene_report` judges the lanes it returns (docs/export.md "Scene conformance"):
 
-- status agreement with the float32 walk of the testbed on at least
+- status agreement with the float32 solver of the testbed on at least
   `tolerance.status.agreement` (0.999) of the conditioned lanes (`conditioned = 1`: float32
   decides their status, `export.scene_writer`), disagreements tabulated by status pair,
   those of the other lanes separately;
@@ -63,7 +64,8 @@ ROUNDING_FACTOR = 4.0
 def scene_shader_source(shader_dir: Path | None = None) -> str:
     """The complete compute shader of the scene lanes, ready for glslangValidator."""
     shader_dir = Path(shader_dir or SHADER_DIR)
-    parts = ["#version 450", "// caustics_jax conformance shader for scene files (start point, walk, D, irradiance)",
+    parts = ["#version 450",
+             "// caustics_jax conformance shader for scene files (start point, walk or Newton, D, irradiance)",
              f"layout(local_size_x = {LOCAL_SIZE}) in;"]
     parts += [glsl_struct(fields, STRUCTS[name]) for name, fields in sr.BUFFERS.items()]
     parts += [
