@@ -49,6 +49,9 @@ figures: $(STAMP)
 	$(PY) -m experiments.exhaustive_cost
 	$(PY) -m experiments.throughput
 	$(PY) -m experiments.compile_options
+	$(PY) -m experiments.ellipse
+	$(PY) -m experiments.differential
+	$(PY) -m experiments.denoiser
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 # The GLSL walk and one-step Newton on lavapipe (or another Vulkan device) against the JAX
