@@ -52,6 +52,8 @@ figures: $(STAMP)
 	$(PY) -m experiments.ellipse
 	$(PY) -m experiments.differential
 	$(PY) -m experiments.denoiser
+	$(PY) -m experiments.temporal
+	$(PY) -m experiments.reuse
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 # The GLSL walk and one-step Newton on lavapipe (or another Vulkan device) against the JAX

@@ -120,3 +120,16 @@ def test_float32_scene_is_float32_throughout(name):
 def test_generator_arguments_name_their_cause(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+def test_the_animated_pools_advance_with_time_and_time_zero_is_the_still_mesh():
+    """`time` (the experiments' animated pool, experiments/temporal.py and reuse.py): the
+    default is today's mesh bit for bit, a later time moves the waves (deep-water
+    dispersion) and not the connectivity."""
+    for make in (lambda **kw: scenes.wavy_pool(512, **kw), lambda **kw: scenes.lagoon(512, **kw)):
+        still, zero, later = make(), make(time=0.0), make(time=1 / 30)
+        assert np.array_equal(np.asarray(still.surface.vertices), np.asarray(zero.surface.vertices))
+        assert np.array_equal(np.asarray(still.surface.normals), np.asarray(zero.surface.normals))
+        moved = np.abs(np.asarray(later.surface.vertices) - np.asarray(still.surface.vertices)).max()
+        assert 0 < moved < 0.05  # a frame at 30 frames/s moves the water by millimetres to centimetres
+        assert np.array_equal(np.asarray(later.surface.faces), np.asarray(still.surface.faces))
