@@ -61,10 +61,10 @@ def certify(mesh, receiver: ReceiverGrid, k: int = 2, lanes: int = 256, seed: in
             if np.any(total > 0) else 0.0}
 
 
-def errors(E: np.ndarray, ref: np.ndarray) -> dict:
-    """Relative L1 and RMS errors of a map against the reference, over the cells the
-    reference lights."""
-    lit = ref > 0
+def errors(E: np.ndarray, ref: np.ndarray, lit: np.ndarray | None = None) -> dict:
+    """Relative L1 and RMS errors of a map against the reference, over the cells `lit`
+    (default: the cells the reference lights)."""
+    lit = ref > 0 if lit is None else lit
     diff = (E - ref)[lit]
     return {"rel_L1": float(np.sum(np.abs(diff)) / np.sum(ref[lit])),
             "rel_rms": float(np.sqrt(np.mean(diff**2)) / np.sqrt(np.mean(ref[lit] ** 2)))}

@@ -57,7 +57,7 @@ SCAN_LANES = 256
 
 @jax.jit
 def _ellipse_flags(V, N, P, L):
-    """Per (lane, face) row: is the conic an interior ellipse of the face?"""
+    """Per row (a lane's face): is the lane's conic an interior ellipse of that face?"""
     coef = conic_coefficients(V, N, P, L)
     return jax.vmap(lambda c: interior_ellipse(c)[3])(coef)
 
@@ -89,8 +89,7 @@ def one(n, amplitude, receivers):
     prep = prepare(mesh)
     start = prep.start_points(P, L)
     V0, N0 = mesh.triangle(jnp.maximum(start.face, 0))
-    coef = conic_coefficients(V0, N0, P, L)
-    flags = np.asarray(jax.vmap(lambda c: interior_ellipse(c)[3])(coef))
+    flags = np.asarray(_ellipse_flags(V0, N0, P, L))
     flags = flags & np.asarray(start.found)
     t0 = time.perf_counter()
     sol = solve(prep, P, L, method=Walk(fallback="none"), features=None, start=start)

@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 from caustics_jax import scenes  # noqa: E402
 from caustics_jax.kernels import gather_previous, temporal_ema  # noqa: E402
 from caustics_jax.transport import photon_irradiance  # noqa: E402
-from experiments.caustic_reference import ETA, LIGHT, receiver_grid, reference_map  # noqa: E402
+from experiments.caustic_reference import ETA, LIGHT, errors, receiver_grid, reference_map  # noqa: E402
 from experiments.common import ROOT, parse_args, use_agg, write_json  # noqa: E402
 
 use_agg()
@@ -81,7 +81,8 @@ def _step(p, up, m, r, L_prev, L, alpha):
 
 
 def rel_rms(E, ref, lit) -> float:
-    return float(np.sqrt(np.mean((E - ref)[lit] ** 2)) / np.sqrt(np.mean(ref[lit] ** 2)))
+    """Relative RMS of `E` against `ref` over the cells `lit` (`caustic_reference.errors`)."""
+    return errors(E, ref, lit)["rel_rms"]
 
 
 def main(argv=None):

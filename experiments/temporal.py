@@ -39,15 +39,13 @@ import numpy as np  # noqa: E402
 
 from caustics_jax import Newton, Status, Walk, scenes, solve  # noqa: E402
 from caustics_jax.transport import ReceiverGrid, irradiance, photon_irradiance  # noqa: E402
+from experiments.caustic_reference import ETA, LIGHT, UP  # noqa: E402  (the same light and water)
 from experiments.common import ROOT, parse_args, use_agg, write_json  # noqa: E402
 
 use_agg()
 import matplotlib.pyplot as plt  # noqa: E402
 
 FIG = ROOT / "figures" / "temporal.png"
-LIGHT = np.array([0.4, -0.3, 3.0])
-UP = np.array([0.0, 0.0, 1.0])
-ETA = 1.333
 DEPTH, AMPLITUDE, TRIANGLES = 3.0, 0.3, 2048
 FPS = 30.0
 #: A solution jumps when its point moves by more than this many surface displacements.

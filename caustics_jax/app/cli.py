@@ -383,6 +383,7 @@ def _conformance(args) -> int:
 
 def _add_export_args(p: argparse.ArgumentParser) -> None:
     from ..export import KERNELS, SCENES
+    from ..export.scene_records import SOLVERS
 
     p.add_argument("--out", required=True, help="output directory (created if missing)")
     p.add_argument("--kernels", nargs="+", default=None, metavar="KERNEL",
@@ -400,7 +401,7 @@ def _add_export_args(p: argparse.ArgumentParser) -> None:
                         "--floor-depth, --eta or --scene-file")
     _add_scene_args(p)
     p.add_argument("--lanes", type=int, default=None, help="lanes per scene (default: 256)")
-    p.add_argument("--solvers", nargs="+", default=["walk", "newton"], choices=["walk", "newton"],
+    p.add_argument("--solvers", nargs="+", default=list(SOLVERS), choices=list(SOLVERS),
                    help="solvers whose scene files are written: <scene>.json (walk), <scene>.newton.json (one-step "
                         "Newton) (default: both)")
     p.add_argument("--newton-initial-step", type=float, default=1.0, metavar="BETA",

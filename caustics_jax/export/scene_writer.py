@@ -167,9 +167,8 @@ def _ties_agree(mesh, P, L, start, status, eta, walk) -> np.ndarray:
     idx = lanes[rows]
     ab = ab[rows, cols]
     delta = 8 * float(np.finfo(np.float32).eps)
-    for nudge in ((0, 0), (1, 1), (-1, -1), (1, -1), (-1, 1)):
-        x = np.maximum(ab + delta * np.asarray(nudge, np.float64), 0)
-        x = (x / np.maximum(x.sum(-1, keepdims=True), 1)).astype(np.float32)  # into the closed face
+    for nudge in NUDGES[:5]:
+        x = _moved_into_face(ab, delta, nudge)
         other = solve(mesh, P_np[idx], L_np[idx], eta=eta, method=walk, features=None,
                       start=(cand[rows, cols].astype(np.int32), x, np.ones(rows.size, bool)))
         np.logical_and.at(agree, idx, np.asarray(other.status) == np.asarray(status)[idx])
@@ -192,14 +191,16 @@ NUDGES = ((0, 0), (1, 1), (-1, -1), (1, -1), (-1, 1), (2, 0), (0, 2), (-2, 0), (
 TRANSPORT_NUDGE = 4
 
 
+def _moved_into_face(ab: np.ndarray, delta: float, nudge) -> np.ndarray:
+    """float32 barycentrics `ab + delta nudge`, projected into the closed triangle."""
+    x = np.maximum(np.asarray(ab, np.float64) + delta * np.asarray(nudge, np.float64), 0)
+    return (x / np.maximum(x.sum(-1, keepdims=True), 1)).astype(np.float32)
+
+
 def _nudged_points(ab32: np.ndarray) -> list[np.ndarray]:
     """float32 barycentrics `ab32` moved by each of `NUDGES` (into the closed triangle)."""
     delta = TRANSPORT_NUDGE * float(np.finfo(np.float32).eps)
-    out = []
-    for nudge in NUDGES:
-        x = np.clip(ab32.astype(np.float64) + delta * np.asarray(nudge, np.float64), 0, 1)
-        out.append((x / np.maximum(x.sum(-1, keepdims=True), 1)).astype(np.float32))
-    return out
+    return [_moved_into_face(ab32, delta, nudge) for nudge in NUDGES]
 
 
 def _transport_at(mesh, face, points, P, L, n_P, intensity, sigma_t, eta) -> tuple[np.ndarray, np.ndarray]:

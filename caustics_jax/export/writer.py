@@ -180,6 +180,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     [1, 2^20], a seed outside [0, 2^63 - 1], or an `out_dir` that is empty, a file, lies below a file
     or cannot be created or written.
     """
+    from .scene_records import SOLVERS
     from .scene_registry import SCENES, SceneSpec
     from .scene_writer import check_scene_solver, write_scenes
 
@@ -189,7 +190,7 @@ def export(out_dir, kernels: list[str] | None = None, count: int = 256, seed: in
     if not all(isinstance(x, SceneSpec) for x in extra):
         raise ValueError(f"extra_scenes must be export SceneSpecs (scene_cases.mesh_file_scene), got {extra!r}")
     specs = [SCENES[n] for n in scene_names] + extra
-    solver_names = _selection("solvers", solvers, dict.fromkeys(("walk", "newton")), "solver")
+    solver_names = _selection("solvers", solvers, SOLVERS, "solver")
     if "newton" in solver_names:
         check_scene_solver("newton", newton=newton)  # before any work
     if len({sp.name for sp in specs}) < len(specs):

@@ -104,31 +104,43 @@ static const char *type_name(VkPhysicalDeviceType t) {
     }
 }
 
-/* --list: the devices, one line each (see the header). Exit status 3 without any. */
-static int list_devices(void) {
+/* A Vulkan instance at API version `api` (0 on success). */
+static int open_instance(uint32_t api, const char *name, VkInstance *inst) {
     VkApplicationInfo app = {VK_STRUCTURE_TYPE_APPLICATION_INFO};
-    app.pApplicationName = "caustics_jax device list";
-    app.apiVersion = VK_API_VERSION_1_1;
+    app.pApplicationName = name;
+    app.apiVersion = api;
     VkInstanceCreateInfo ici = {VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
     ici.pApplicationInfo = &app;
+    return vkCreateInstance(&ici, NULL, inst) == VK_SUCCESS ? 0 : 1;
+}
+
+/* The instance's physical devices, at most 16. */
+static uint32_t physical_devices(VkInstance inst, VkPhysicalDevice physs[16]) {
+    uint32_t n_phys = 0;
+    vkEnumeratePhysicalDevices(inst, &n_phys, NULL);
+    if (n_phys > 16) n_phys = 16;
+    if (n_phys) vkEnumeratePhysicalDevices(inst, &n_phys, physs);
+    return n_phys;
+}
+
+/* --list: the devices, one line each (see the header). Exit status 3 without any. */
+static int list_devices(void) {
     VkInstance inst;
-    if (vkCreateInstance(&ici, NULL, &inst) != VK_SUCCESS) {
-        app.apiVersion = VK_API_VERSION_1_0; /* a 1.0 loader: no subgroup query */
-        if (vkCreateInstance(&ici, NULL, &inst) != VK_SUCCESS) {
+    uint32_t api = VK_API_VERSION_1_1;
+    if (open_instance(api, "caustics_jax device list", &inst)) {
+        api = VK_API_VERSION_1_0; /* a 1.0 loader: no subgroup query */
+        if (open_instance(api, "caustics_jax device list", &inst)) {
             fprintf(stderr, "cj_vk_host: no Vulkan instance (no loader or no driver)\n");
             return 3;
         }
     }
-    uint32_t n_phys = 0;
-    vkEnumeratePhysicalDevices(inst, &n_phys, NULL);
     VkPhysicalDevice physs[16];
-    if (n_phys > 16) n_phys = 16;
-    vkEnumeratePhysicalDevices(inst, &n_phys, physs);
+    uint32_t n_phys = physical_devices(inst, physs);
     for (uint32_t d = 0; d < n_phys; ++d) {
         VkPhysicalDeviceProperties props;
         vkGetPhysicalDeviceProperties(physs[d], &props);
         uint32_t subgroup = 0;
-        if (app.apiVersion >= VK_API_VERSION_1_1 && props.apiVersion >= VK_API_VERSION_1_1) {
+        if (api >= VK_API_VERSION_1_1 && props.apiVersion >= VK_API_VERSION_1_1) {
             VkPhysicalDeviceSubgroupProperties sub = {VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
             VkPhysicalDeviceProperties2 p2 = {VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2};
             p2.pNext = &sub;
@@ -179,25 +191,17 @@ int main(int argc, char **argv) {
         return 2;
     }
 
-    VkApplicationInfo app = {VK_STRUCTURE_TYPE_APPLICATION_INFO};
-    app.pApplicationName = "caustics_jax conformance";
-    app.apiVersion = VK_API_VERSION_1_0;
-    VkInstanceCreateInfo ici = {VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
-    ici.pApplicationInfo = &app;
     VkInstance inst;
-    if (vkCreateInstance(&ici, NULL, &inst) != VK_SUCCESS) {
+    if (open_instance(VK_API_VERSION_1_0, "caustics_jax conformance", &inst)) {
         fprintf(stderr, "cj_vk_host: no Vulkan instance (no loader or no driver)\n");
         return 3;
     }
-    uint32_t n_phys = 0;
-    vkEnumeratePhysicalDevices(inst, &n_phys, NULL);
+    VkPhysicalDevice physs[16];
+    uint32_t n_phys = physical_devices(inst, physs);
     if (n_phys == 0) {
         fprintf(stderr, "cj_vk_host: no Vulkan physical device\n");
         return 3;
     }
-    VkPhysicalDevice physs[16];
-    if (n_phys > 16) n_phys = 16;
-    vkEnumeratePhysicalDevices(inst, &n_phys, physs);
 
     /* First device with a compute queue; CJ_VK_DEVICE=<index> or CJ_VK_DEVICE_NAME=<text>
        picks another. */

@@ -52,11 +52,9 @@ SCENE_FILES = ("common.glsl", "scene_mesh.glsl", "start_point.glsl", "arcs.glsl"
 #: GLSL struct names of the scene buffers.
 STRUCTS = {"scene": "SceneParams", "vertices": "Vertex", "faces": "Face", "lanes": "Lane", "cell_lines": "CellLine",
            "cell_faces": "CellFace", "cell_rows": "CellRow"}
-#: The buffers after `lanes` (bound from 2 on, in this order) and their GLSL block names.
-BINDINGS = {"scene": ("SceneBuffer", "SceneParams cj_scene;"), "vertices": ("VertexBuffer", "Vertex cj_vertices[];"),
-            "faces": ("FaceBuffer", "Face cj_faces[];"), "cell_lines": ("CellLineBuffer", "CellLine cj_cell_lines[];"),
-            "cell_faces": ("CellFaceBuffer", "CellFace cj_cell_faces[];"),
-            "cell_rows": ("CellRowBuffer", "CellRow cj_cell_rows[];")}
+#: The buffers after `lanes`, bound from 2 on in file order (`scene_records.BUFFERS`): the
+#: GLSL variable of each is `cj_<buffer>` (one record for `scene`, an array for the others).
+BINDINGS = tuple(name for name in sr.BUFFERS if name != "lanes")
 #: Factor on refract's float32 rounding bound in the silent-wrong test.
 ROUNDING_FACTOR = 4.0
 
@@ -72,8 +70,8 @@ def scene_shader_source(shader_dir: Path | None = None) -> str:
         "layout(std430, binding = 0) readonly buffer LanesIn { Lane lanes_in[]; };",
         "layout(std430, binding = 1) writeonly buffer LanesOut { Lane lanes_out[]; };",
     ]
-    parts += [f"layout(std430, binding = {i + 2}) readonly buffer {block} {{ {decl} }};"
-              for i, (block, decl) in enumerate(BINDINGS.values())]
+    parts += [f"layout(std430, binding = {i + 2}) readonly buffer {STRUCTS[name]}Buffer {{ {STRUCTS[name]} "
+              f"cj_{name}{'' if name == 'scene' else '[]'}; }};" for i, name in enumerate(BINDINGS)]
     parts += ["layout(push_constant) uniform Push { uint count; } push;"]
     for i, name in enumerate(SCENE_FILES):
         parts += [f"#line 1 {i + 1}", (shader_dir / name).read_text()]
