@@ -78,6 +78,13 @@ KERNELS = {
     "kernels.fresnel_reflect_approx": (K.fresnel_reflect_approx, (np.array([1.0, 0, -1]), _Z, 0.02)),
     "kernels.fresnel_refract_approx": (K.fresnel_refract_approx, (np.array([1.0, 0, -1]), _Z, 0.02)),
     "kernels.ray_intensity": (K.ray_intensity, (np.array(2.0), np.array(1.0), np.array(1.0))),
+    "kernels.throughput": (K.throughput, (np.array([1.0, 0.0]), np.array([1.0, 2.0]), 0.75, 0.1)),
+    "kernels.photon_budget": (K.photon_budget, (np.array([0.0, 1.0, 4.0]), 100.0)),
+    "kernels.energy_cull": (K.energy_cull, (np.array([2.0, 0.0]), np.array([1.0, 1.0]))),
+    "kernels.photon_cull": (K.photon_cull, (np.array([1.0, 2.0]), np.array([1.0, 0.0]), np.array([1.0, 1.0]),
+                                            np.array([0.0, 1.0]))),
+    "kernels.throughput_cull": (K.throughput_cull, (np.array([1.0, 1.0]), np.array([1.0, 2.0]),
+                                                    np.array([0.0, 1.0]), 0.75, 0.1)),
     "kernels.bilateral_weight": (K.bilateral_weight, (np.array(1.0), np.array(2.0), _X, np.zeros(3), np.array(3.0))),
     "kernels.luminance": (K.luminance, (np.array([1.0, 2, 3]),)),
     "kernels.adaptive_kernel_params": (K.adaptive_kernel_params, (np.array([0.0, 1, 5]), 20.0)),
@@ -125,7 +132,7 @@ _MESH = cj.SurfaceMesh.from_arrays(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1
 # Public functions of `caustics_jax.transport` that are host-level (they take a mesh, a
 # grid, a generator), not array kernels: each validates its own arguments (tests in
 # tests/transport and below).
-TRANSPORT_HOST = {"irradiance", "photon_irradiance", "sms_biased", "sms_unbiased", "splat_footprints",
+TRANSPORT_HOST = {"irradiance", "photon_irradiance", "trace_photons", "sms_biased", "sms_unbiased", "splat_footprints",
                   "path_visible", "surface_hits", "surface_starts"}
 
 
@@ -781,6 +788,7 @@ def test_a_float64_mesh_used_with_x64_off_names_the_cause():
         "segment_blocked": lambda: occlusion.segment_blocked(mesh, P, L),
         "path_visible": lambda: path_visible(mesh, P, (P + L) / 2, L),
         "surface_hits": lambda: T.surface_hits(mesh, L[0], P),
+        "trace_photons": lambda: T.trace_photons(mesh, L[0], P, intensity=1.0, area=1.0, receiver_z=-1.0),
         "surface_starts": lambda: T.surface_starts(mesh, 4, np.random.default_rng(0)),
         "build_accel": lambda: start_points_module.build_accel(mesh),
         "build_bvh": lambda: start_points_module.build_bvh(mesh), "bin_faces": lambda: bin_faces(mesh),

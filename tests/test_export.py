@@ -586,7 +586,7 @@ def test_scene_cells_list_every_face_and_bound_its_heights(scene_data, scene):
         if listed.size:
             assert rows["z_lo"][r] <= z[listed].min() and z[listed].max() <= rows["z_hi"][r], r
     assert p["cell_w_lo"][0] == b["vertices"]["position"][:, w].min()
-    assert m["version"]["format"] == ex.FORMAT_VERSION == 2
+    assert m["version"]["format"] == ex.FORMAT_VERSION == 3
 
 
 def test_no_crossing_scene_has_lanes_that_cross_nothing(scene_data):

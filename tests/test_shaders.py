@@ -87,6 +87,8 @@ def test_conformance_table_lists_every_output(device, tmp_path):
     ("edge_intersections", "const float tol = 64.0 * CJ_EPS;", "const float tol = 0.0;"),  # no root window
     ("photon_compression", "cj_refract(l_dir, n, 1.0 / eta)", "cj_refract(l_dir, n, eta)"),  # inverted ratio
     ("fixed_point", "uint(roundEven(max(x, 0.0) * 268435456.0))", "uint(max(x, 0.0) * 268435456.0)"),  # truncation
+    ("photon_cull", "cj_energy_kept(r.albedo * r.beta, r.final)", "cj_energy_kept(r.beta, r.final)"),  # no albedo
+    ("throughput_cull", "cj_throughput(r.cos_i, r.d, r.eta, r.sigma_t)", "cj_throughput(r.cos_i, 0.0, r.eta, r.sigma_t)"),
 ])
 def test_other_plausible_wrong_lines_fail_conformance(device, kernel, line, wrong):
     data, work, host = device
@@ -227,6 +229,7 @@ NON_FINITE = {
     "fresnel": [("cos_i", None, NAN)],  # clamp(NaN) is undefined in GLSL; the kernel gives R = 1
     "edge_intersections": [("coef", 0, INF), ("coef", 0, -INF), ("coef", 4, NAN)],  # no roots
     "signed_sine": [("P", 0, INF), ("L", 2, -INF)],  # cj_path_vectors: an infinite length is degenerate
+    "photon_cull": [("cos_i", None, NAN), ("t", None, INF)],  # T = 0 (R = 1); attenuated to 0, none in clear water
 }
 
 

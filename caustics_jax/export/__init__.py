@@ -42,6 +42,7 @@ from . import cases_screen  # reuse_weight, bilateral_weight, fixed_point
 from . import cases_mesh  # cross_edge
 from . import cases_photons  # cascade_dispatch, photon_intensity, sprite
 from . import cases_collection  # resolve_ema, reuse_accepted, denoise_subpass
+from . import cases_culling  # photon_cull, throughput_cull
 from . import scene_cases  # the scenes (scene_registry.SCENES)
 # isort: on
 from .cases_conic import EDGE_TOL

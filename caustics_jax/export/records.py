@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 #: Format version of the manifest and binary layout; bump on any incompatible change.
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: Case tags, stored per record in the `case_tag` field (`case` is a keyword in C and GLSL).
 CASES = {"random": 0, "planted": 1, "adversarial": 2}
 

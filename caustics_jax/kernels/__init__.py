@@ -1,6 +1,6 @@
 """Real-time pipeline kernels (math.md §8, §7 sprites): collection points and fixed point
 (seed 000), denoiser, cascades, attenuation, Fresnel and sprites (seed 004), projected
-photons (seed 002).
+photons (seed 002), energy culling and the adaptive photon budget (seed 003).
 
 Pure, vectorised over leading batch axes, float32 in -> float32 out.
 """
@@ -21,6 +21,7 @@ from .bilateral import (
     denoise_subpass,
     luminance,
 )
+from .budget import BUDGET_FLOOR, photon_budget
 from .cascades import (
     cascade_deltas,
     cascade_dispatch,
@@ -44,13 +45,16 @@ from .collection import (
     reuse_weight,
     temporal_ema,
 )
+from .culling import CullStatus, energy_cull, photon_cull, throughput, throughput_cull
 from .fixed_point import FixedPointSum, fixed_point_accumulate, fixed_point_decode, fixed_point_encode
 from .projection import projected_photon_position, ray_plane_intersection
 from .sprites import sprite_basis, sprite_corners, sprite_foreshortening, sprite_intensity, sprite_size
 
 __all__ = [
+    "BUDGET_FLOOR",
     "C_SCENE_FACTOR",
     "C_SCENE_FACTOR_ALG4",
+    "CullStatus",
     "FixedPointSum",
     "RADIUS_CAP",
     "adaptive_kernel_params",
@@ -64,6 +68,7 @@ __all__ = [
     "ccm0_size",
     "cylinder_aabb",
     "denoise_subpass",
+    "energy_cull",
     "fixed_point_accumulate",
     "fixed_point_decode",
     "fixed_point_encode",
@@ -74,6 +79,8 @@ __all__ = [
     "intensity_attenuation",
     "light_position",
     "luminance",
+    "photon_budget",
+    "photon_cull",
     "pixel_footprint_radius",
     "pixel_spread_angle",
     "projected_photon_position",
@@ -91,4 +98,6 @@ __all__ = [
     "sprite_intensity",
     "sprite_size",
     "temporal_ema",
+    "throughput",
+    "throughput_cull",
 ]

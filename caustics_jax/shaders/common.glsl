@@ -57,6 +57,17 @@ float cj_fresnel_reflectance(float cos_i, float eta) {
     return (r_s * r_s + r_p * r_p) / 2.0;
 }
 
+// Throughput after the water (kernels.culling.throughput; seed 001 eq. 25's T A, seed 003):
+// beta = T(cos_i, eta) exp(-sigma_t max(t, 0)), T = 1 - R the exact Fresnel transmittance.
+float cj_throughput(float cos_i, float t, float eta, float sigma_t) {
+    // clear water (sigma_t = 0) attenuates nothing, also over an infinite t (0 inf is NaN)
+    float optical_depth = sigma_t > 0.0 ? sigma_t * max(t, 0.0) : 0.0;
+    return (1.0 - cj_fresnel_reflectance(cos_i, eta)) * exp(-optical_depth);
+}
+
+// Seed 003's cull test (kernels.culling.energy_cull): kept where energy >= threshold; NaN culled.
+bool cj_energy_kept(float energy, float threshold) { return energy >= threshold; }
+
 // ------------------------------------------------------ barycentrics (seed 001 eq. 3, 6-8)
 
 // M = V0 + a (V1 - V0) + b (V2 - V0), same for the unnormalised interpolated normal n~.

@@ -14,11 +14,20 @@ from .photon_differentials import (
     texel_jacobian,
     triangle_area,
 )
-from .photons import EmissionPlane, PhotonMap, ReceiverGrid, photon_irradiance, surface_hits
+from .photons import (
+    EmissionPlane,
+    PhotonHits,
+    PhotonMap,
+    ReceiverGrid,
+    photon_irradiance,
+    surface_hits,
+    trace_photons,
+)
 from .visibility import path_visible
 
 __all__ = [
     "EmissionPlane",
+    "PhotonHits",
     "EstimatorResult",
     "PhotonMap",
     "ReceiverGrid",
@@ -36,6 +45,7 @@ __all__ = [
     "sms_unbiased",
     "splat_footprints",
     "surface_hits",
+    "trace_photons",
     "surface_starts",
     "texel_jacobian",
     "triangle_area",

@@ -218,6 +218,37 @@ def refract_into_medium(d, n_s, eta):
     return refract(d, n_s, 1 / eta), fresnel_transmittance(cos_i, 1 / eta), ok
 
 
+def emitted_flux(L, X, z_e, intensity, area_per_photon):
+    """Flux of photons from a point light `L` through emission-plane points `X` (height
+    `z_e`), each standing for `area_per_photon` of the plane: `Phi = I_e cos_e A / r_e^2`,
+    `cos_e = (L_z - z_e)/r_e` (module docstring; `A = A_e / n` for uniform emission), in an
+    order that stays finite for a far light in float32 (`I_e / r_e^2` first). Also `d`,
+    the unit directions `(X - L)/r_e`."""
+    d_raw = X - L
+    r_e = jnp.linalg.norm(d_raw, axis=-1)
+    return intensity / r_e**2 * ((L[..., 2] - z_e) / r_e) * area_per_photon, d_raw / r_e[..., None]
+
+
+def propagate_photons(mesh, bvh, X, d, span, z_r, eta):
+    """`(Y, T, t, valid, cos_i)` of photons through emission-plane points `X` along unit `d`
+    (jitted core): each ray starts `span` back from `X` along `-d` (not at the light:
+    float32 resolves a point 1.5e11 m away only to its ulp, 1.6e4 m), hits the surface
+    (`surface_hits`), refracts at the interpolated normal with the exact Fresnel
+    transmittance `T` and reaches the receiver plane `z = z_r` at `Y` (xy) after the path
+    `t` in the medium; `cos_i` is the cosine of incidence on the shading normal. `valid` is
+    False where it misses the surface, meets it from below its shading normal, or does not
+    go down after refracting."""
+    face, ab, found = surface_hits(mesh, X - span * d, X, bvh=bvh)
+    V, N = mesh.triangle(face)
+    M = barycentric_point(V, ab)
+    n_s = safe_normalize(interpolated_normal(N, ab))
+    r, T, ok = refract_into_medium(d, n_s, eta)
+    down = r[:, 2] < 0
+    t = (z_r - M[:, 2]) / jnp.where(down, r[:, 2], -1)
+    Y = M + t[:, None] * r
+    return Y[:, :2], T, t, found & ok & down, -dot(d, n_s)
+
+
 @functools.partial(jax.jit, static_argnames=("chunk", "at_infinity"))
 def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total, count, chunk: int,
                  at_infinity: bool = False):
@@ -235,25 +266,92 @@ def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total
         d = jnp.broadcast_to(L, X.shape)
         flux = jnp.full(chunk, intensity * A_e * -L[2] / n_total)
     else:
-        d_raw = X - L
-        r_e = jnp.linalg.norm(d_raw, axis=-1)
-        d = d_raw / r_e[:, None]
-        # Phi = I_e A_e cos_e / (n r_e^2), cos_e = (L_z - z_e) / r_e (module docstring), in
-        # an order that stays finite for a far light in float32 (I_e / r_e^2 first).
-        flux = intensity / r_e**2 * ((L[2] - z_e) / r_e) * (A_e / n_total)
-    # Each ray starts on the emission plane's side of the surface, a plane size back from X
-    # along -d (not at L: float32 resolves a point 1.5e11 m away only to its ulp, 1.6e4 m).
-    origin = X - ((x1 - x0) + (y1 - y0)) * d
-    face, ab, found = surface_hits(mesh, origin, X, bvh=bvh)
-    V, N = mesh.triangle(face)
-    M = barycentric_point(V, ab)
-    r, T, ok = refract_into_medium(d, safe_normalize(interpolated_normal(N, ab)), eta)
-    down = r[:, 2] < 0
-    t = (z_r - M[:, 2]) / jnp.where(down, r[:, 2], -1)
-    Y = M + t[:, None] * r
-    valid = found & ok & down & (jnp.arange(chunk) < count)
+        flux, d = emitted_flux(L, X, z_e, intensity, A_e / n_total)
+    Y, T, t, hit, _ = propagate_photons(mesh, bvh, X, d, (x1 - x0) + (y1 - y0), z_r, eta)
+    valid = hit & (jnp.arange(chunk) < count)
     w = jnp.where(valid, flux * T * jnp.exp(-sigma_t * t), 0)
-    return Y[:, :2], w.astype(dtype), valid
+    return Y, w.astype(dtype), valid
+
+
+@jax.jit
+def _trace_points(mesh, bvh, L, X, plane, z_r, eta, intensity, area):
+    flux, d = emitted_flux(L, X, plane[0], intensity, area)
+    Y, T, t, valid, cos_i = propagate_photons(mesh, bvh, X, d, (plane[2] - plane[1]) + (plane[4] - plane[3]), z_r,
+                                              eta)
+    return Y, flux, T, t, valid, cos_i
+
+
+class PhotonHits(NamedTuple):
+    """Photons traced one by one (`trace_photons`), numpy float64, in the caller's frame.
+
+    Attributes:
+        Y: `(N, 2)` xy of the receiver-plane hit.
+        flux: `(N,)` emitted flux (W) of each photon.
+        T: `(N,)` exact Fresnel transmittance at the surface.
+        t: `(N,)` path length in the medium (m).
+        valid: `(N,)` False where the photon misses the surface, meets it from below its
+            shading normal or does not reach the receiver plane; such photons carry nothing.
+        cos_i: `(N,)` cosine of incidence on the shading normal, the light's side
+            (`T = fresnel_transmittance(cos_i, 1 / eta)`).
+    """
+
+    Y: np.ndarray
+    flux: np.ndarray
+    T: np.ndarray
+    t: np.ndarray
+    valid: np.ndarray
+    cos_i: np.ndarray
+
+
+def trace_photons(mesh: SurfaceMesh | PreparedSurface, L, X, *, intensity: float, area, eta: float = 1.333,
+                  receiver_z: float) -> PhotonHits:
+    """Photons from a point light `L` through the emission-plane points `X`, traced one by one.
+
+    The building block of `photon_irradiance` for callers that emit their own photons
+    (stratified per light-space texel, with an adaptive budget) or act on each photon
+    before binning (seed 003's culling, `kernels.photon_cull`). `X` `(N, 3)` must lie on
+    `EmissionPlane.covering(mesh, L)` (its `z`); each photon stands for `area` (scalar or
+    `(N,)`, m^2) of the plane, so its flux is `I_e cos_e area / r_e^2` (module docstring):
+    with `area = A_e / N` for uniform `X` the photons estimate the irradiance as
+    `photon_irradiance` does. The energy a photon brings to the receiver is
+    `flux T exp(-sigma_t t)`. Traced in the mesh's dtype (padded to a power of two, one
+    compile per size), returned in float64.
+    """
+    prep = prepare(mesh)
+    dtype = prep.dtype
+    L_np = check_points("L", L, dtype)
+    if L_np.shape != (3,):
+        raise ValueError(f"L must be one point of shape (3,), got {L_np.shape}")
+    X_np = check_points("X", X, dtype)
+    if X_np.ndim != 2 or X_np.shape[1] != 3:
+        raise ValueError(f"X must have shape (N, 3), got {X_np.shape}")
+    plane = EmissionPlane.covering(prep.mesh, L_np)
+    if not np.allclose(X_np[:, 2], plane.z, rtol=0, atol=1e-9 * max(1.0, abs(plane.z))):
+        raise ValueError(f"X must lie on the emission plane z = {plane.z} (EmissionPlane.covering(mesh, L))")
+    n = len(X_np)
+    area_np = np.broadcast_to(check_real("area", area, 0) if np.ndim(area) == 0 else np.asarray(area, float), (n,))
+    if not np.all(np.isfinite(area_np)) or np.any(area_np < 0):
+        raise ValueError("area must be finite and >= 0 (m^2 of the emission plane per photon)")
+    intensity = check_fits("intensity", check_real("intensity", intensity, 0), dtype)
+    eta = check_fits("eta", check_eta(eta), dtype, positive=True)
+    receiver_z = check_real("receiver_z", receiver_z)
+    if receiver_z >= float(np.min(np.asarray(prep.mesh.vertices)[:, 2])):
+        raise ValueError(f"the receiver plane (receiver_z = {receiver_z}) must lie below the surface")
+    origin = prep.origin
+    local = prep.local.mesh
+    bvh = None if local.grid is not None else prep.local.bvh
+    size = power_of_two_bucket(max(n, 1), 256)
+    pad = size - n
+    X_pad = np.concatenate([X_np - origin, np.broadcast_to(X_np[:1] - origin, (pad, 3)) if n else
+                            np.zeros((pad, 3))])
+    area_pad = np.concatenate([area_np, np.zeros(pad)])
+    plane_local = EmissionPlane.covering(local, prep.to_local(L_np))
+    out = _trace_points(local, bvh, jnp.asarray(prep.to_local(L_np), dtype), jnp.asarray(X_pad, dtype),
+                        jnp.asarray(tuple(plane_local), dtype), jnp.asarray(receiver_z - origin[2], dtype),
+                        jnp.asarray(eta, dtype), jnp.asarray(intensity, dtype), jnp.asarray(area_pad, dtype))
+    Y, flux, T, t, valid, cos_i = (np.asarray(x)[:n] for x in out)
+    return PhotonHits(Y.astype(np.float64) + origin[:2], flux.astype(np.float64), T.astype(np.float64),
+                      t.astype(np.float64), valid, cos_i.astype(np.float64))
 
 
 def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: float, eta: float = 1.333,
