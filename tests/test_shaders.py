@@ -88,7 +88,8 @@ def test_conformance_table_lists_every_output(device, tmp_path):
     ("photon_compression", "cj_refract(l_dir, n, 1.0 / eta)", "cj_refract(l_dir, n, eta)"),  # inverted ratio
     ("fixed_point", "uint(roundEven(max(x, 0.0) * 268435456.0))", "uint(max(x, 0.0) * 268435456.0)"),  # truncation
     ("photon_cull", "cj_energy_kept(r.albedo * r.beta, r.final)", "cj_energy_kept(r.beta, r.final)"),  # no albedo
-    ("throughput_cull", "cj_throughput(r.cos_i, r.d, r.eta, r.sigma_t)", "cj_throughput(r.cos_i, 0.0, r.eta, r.sigma_t)"),
+    ("throughput_cull", "cj_throughput(r.cos_i, r.d, r.eta, r.sigma_t)",
+     "cj_throughput(r.cos_i, 0.0, r.eta, r.sigma_t)"),  # no attenuation
 ])
 def test_other_plausible_wrong_lines_fail_conformance(device, kernel, line, wrong):
     data, work, host = device

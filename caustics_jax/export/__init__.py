@@ -16,7 +16,7 @@ One concept per module:
 - `cases`: building blocks of the case generators (`f64` runs a package kernel in float64).
 - `cases_optics`, `cases_conic`, `cases_paths`, `cases_screen`: each kernel's generator,
   conditioning filter and registration, side by side.
-- `cases_mesh`, `cases_photons`, `cases_collection`: the pipeline kernels added for the
+- `cases_mesh`, `cases_photons`, `cases_collection`, `cases_culling`: the pipeline kernels added for the
   Vulkan backend (edge crossing; cascade dispatch, photon intensity, sprite; resolve and
   EMA, reuse acceptance, denoiser sub-pass).
 - `writer`: `export_kernel` and `export`.
@@ -98,6 +98,7 @@ __all__ = [
     "c_struct",
     "cases_collection",
     "cases_conic",
+    "cases_culling",
     "cases_mesh",
     "cases_optics",
     "cases_paths",
