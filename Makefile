@@ -54,6 +54,8 @@ figures: $(STAMP)
 	$(PY) -m experiments.denoiser
 	$(PY) -m experiments.temporal
 	$(PY) -m experiments.reuse
+	$(PY) -m experiments.cull
+	$(PY) -m experiments.budget
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 # The GLSL walk and one-step Newton on lavapipe (or another Vulkan device) against the JAX

@@ -38,21 +38,26 @@ def receiver_grid(n: int) -> ReceiverGrid:
     return ReceiverGrid(-DEPTH, -1.6, 1.6, -1.6, 1.6, n, n)
 
 
-def reference_map(mesh, receiver: ReceiverGrid, k: int = 2) -> np.ndarray:
-    """`(ny, nx)` cell-average irradiance (W/m^2 for a 1 W/sr light) by walk + D."""
+def reference_map(mesh, receiver: ReceiverGrid, k: int = 2, *, light=LIGHT, sigma_t: float = 0.0,
+                  all_paths: bool = False) -> np.ndarray:
+    """`(ny, nx)` cell-average irradiance (W/m^2 for a 1 W/sr light at `light`) by walk + D,
+    attenuated by `exp(-sigma_t |P - M|)`; `all_paths`: every path on the traced curve
+    summed (`irradiance(..., all_paths=True)`), where one light has several per receiver."""
     P = jnp.asarray(receiver.subsamples(k).reshape(-1, 3))
-    E = irradiance(mesh, P, jnp.asarray(LIGHT), intensity=1.0, eta=ETA, receiver_normal=UP)
+    E = irradiance(mesh, P, jnp.asarray(light), intensity=1.0, eta=ETA, receiver_normal=UP, sigma_t=sigma_t,
+                   all_paths=all_paths)
     return np.asarray(E, np.float64).reshape(receiver.ny, receiver.nx, k * k).mean(-1)
 
 
-def certify(mesh, receiver: ReceiverGrid, k: int = 2, lanes: int = 256, seed: int = 0) -> dict:
-    """Walk + D against the exhaustive all-path irradiance at `lanes` random midpoints:
-    the largest relative difference, and the lanes with more than one path."""
+def certify(mesh, receiver: ReceiverGrid, k: int = 2, lanes: int = 256, seed: int = 0, *, light=LIGHT,
+            all_paths: bool = False) -> dict:
+    """Walk + D (`all_paths`: every path on the traced curve) against the exhaustive all-path
+    irradiance at `lanes` random midpoints: the largest differences."""
     P_all = receiver.subsamples(k).reshape(-1, 3)
     pick = np.random.default_rng(seed).choice(len(P_all), size=min(lanes, len(P_all)), replace=False)
     P = jnp.asarray(P_all[pick])
-    L = jnp.asarray(LIGHT)
-    walk = np.asarray(irradiance(mesh, P, L, intensity=1.0, eta=ETA, receiver_normal=UP))
+    L = jnp.asarray(light)
+    walk = np.asarray(irradiance(mesh, P, L, intensity=1.0, eta=ETA, receiver_normal=UP, all_paths=all_paths))
     total = np.asarray(irradiance(mesh, P, L, intensity=1.0, eta=ETA, receiver_normal=UP, method="exhaustive",
                                   all_paths=True))
     scale = max(float(np.max(total)), 1e-300)
