@@ -25,6 +25,10 @@ Re-recorded at 89f3759, when `Walk()` took the Newton fallback by default: the w
 are bit for bit those of 75bb65b; the new `walk-fallback` configuration finds 2 more lanes
 of the jittered heightfield in each dtype (488 of 512 against 486; one-step Newton 484)
 and every other lane as the walk alone.
+On 2026-12-02 an AMD EPYC machine without AVX-512 built the float64 jittered heightfield
+to other bits (same pinned packages); the case recorded there from 89f3759 itself is
+`baseline_89f3759_alt.npz` (its statuses, triangles and found flags equal the main
+recording's; 4 planted P, points and iterations differ by rounding).
 """
 
 from __future__ import annotations
@@ -37,6 +41,10 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "baseline_89f3759.npz"
+#: Cases recorded again from 89f3759 on a machine where the case's float64 mesh builds to
+#: other bits (with the same pinned packages; presumably the CPU's vector instructions):
+#: each case is checked against the recording whose mesh digest matches the mesh built here.
+ALTERNATES = [ROOT / "tests" / "data" / "baseline_89f3759_alt.npz"]
 
 
 def _load_tool():
@@ -53,6 +61,25 @@ record_baseline = _load_tool()
 def baseline():
     with np.load(DATA, allow_pickle=False) as data:
         return dict(data)
+
+
+@pytest.fixture(scope="module")
+def alternates():
+    out = []
+    for path in ALTERNATES:
+        with np.load(path, allow_pickle=False) as data:
+            out.append(dict(data))
+    return out
+
+
+def _recording_for(baseline, alternates, key, mesh):
+    """The recording (the main one, or an alternate holding this case) whose mesh digest is
+    the digest of the mesh built here; the main one if none is (its check then fails)."""
+    digest = record_baseline.mesh_digest(mesh)
+    for data in alternates:
+        if f"{key}/mesh_sha256" in data and str(data[f"{key}/mesh_sha256"]) == digest:
+            return data
+    return baseline
 
 
 def _bits(x: np.ndarray) -> np.ndarray:
@@ -91,9 +118,9 @@ def _check_case(baseline, scene, dtype, mesh, P, L):
 
 @pytest.mark.parametrize("dtype", record_baseline.DTYPES)
 @pytest.mark.parametrize("scene", record_baseline.SCENES)
-def test_solve_reproduces_the_baseline_lanes(baseline, scene, dtype):
+def test_solve_reproduces_the_baseline_lanes(baseline, alternates, scene, dtype):
     mesh, P, L = record_baseline.scene_lanes(scene, dtype)
-    failures = _check_case(baseline, scene, dtype, mesh, P, L)
+    failures = _check_case(_recording_for(baseline, alternates, f"{scene}/{dtype}", mesh), scene, dtype, mesh, P, L)
     assert not failures, "\n".join(failures)
 
 
