@@ -22,7 +22,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-NOTEBOOKS = ("solver_comparison", "kernel_accuracy", "irradiance", "shader_reference_data", "your_own_mesh")
+NOTEBOOKS = ("solver_comparison", "kernel_accuracy", "irradiance", "shader_reference_data", "your_own_mesh",
+             "claims")
 
 
 def execute(name: str, out_dir: Path, timeout: int) -> tuple[bool, float, Path]:
