@@ -329,7 +329,10 @@ def trace_photons(mesh: SurfaceMesh | PreparedSurface, L, X, *, intensity: float
     if not np.allclose(X_np[:, 2], plane.z, rtol=0, atol=1e-9 * max(1.0, abs(plane.z))):
         raise ValueError(f"X must lie on the emission plane z = {plane.z} (EmissionPlane.covering(mesh, L))")
     n = len(X_np)
-    area_np = np.broadcast_to(check_real("area", area, 0) if np.ndim(area) == 0 else np.asarray(area, float), (n,))
+    try:
+        area_np = np.broadcast_to(np.asarray(area, np.float64), (n,))
+    except (TypeError, ValueError):
+        raise ValueError(f"area must be a number or one per photon ({n},), got {np.shape(area)}") from None
     if not np.all(np.isfinite(area_np)) or np.any(area_np < 0):
         raise ValueError("area must be finite and >= 0 (m^2 of the emission plane per photon)")
     intensity = check_fits("intensity", check_real("intensity", intensity, 0), dtype)

@@ -82,3 +82,19 @@ def test_throughput_cull_is_monotone_in_its_threshold(dtype):
         assert np.all(looser | ~tighter)  # a tighter threshold never keeps a lane a looser one culled
     beta_hat, _ = throughput_cull(c(cos_i), c(d), c(np.zeros(2048)), AIR_TO_WATER, 0.4)
     np.testing.assert_array_equal(np.asarray(beta_hat), np.asarray(throughput(c(cos_i), c(d), AIR_TO_WATER, 0.4)))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_throughput_at_oblique_incidence_is_the_textbook_fresnel_transmittance(dtype):
+    # Snell and the Fresnel amplitude coefficients written here from n1 = 1 (air), n2 = 1.333
+    # (water): at normal incidence T is the same for eta and 1/eta, so only oblique angles
+    # tell an inverted index ratio (water to air: total internal reflection below cos 0.66)
+    cos_i = np.array([0.2, 0.5, 0.8])
+    n1, n2 = 1.0, 1.333
+    cos_t = np.sqrt(1 - (n1 / n2) ** 2 * (1 - cos_i**2))
+    rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t)
+    rp = (n2 * cos_i - n1 * cos_t) / (n2 * cos_i + n1 * cos_t)
+    want = 1 - (rs**2 + rp**2) / 2
+    got = np.asarray(throughput(jnp.asarray(cos_i, dtype), jnp.zeros(3, dtype), n1 / n2, 0.0))
+    np.testing.assert_allclose(got, want, rtol=64 * EPS[dtype])
+    assert np.all(want < 0.99) and want[0] < 0.75  # oblique enough to matter

@@ -147,3 +147,17 @@ def test_photons_traced_one_by_one_bin_to_the_flat_interface_irradiance(dtype):
     # about 1,000 photons per cell, stratified: cells scatter by <= 1.5% (float64, measured), the
     # mean by far less; a missing Fresnel factor would bias it by 2%, attenuation by 40%
     assert abs(np.mean(E / ref - 1)) < 3e-3 and np.max(np.abs(E / ref - 1)) < 0.03
+
+
+def test_trace_photons_refuses_points_off_the_emission_plane_and_a_receiver_above_the_water():
+    from caustics_jax.transport import EmissionPlane, trace_photons
+
+    scene = scenes.flat_pool(512, dtype=jnp.float32)
+    plane = EmissionPlane.covering(scene.surface, LIGHT)
+    X = np.array([[0.0, 0.0, plane.z], [0.1, 0.2, plane.z]])
+    with pytest.raises(ValueError, match="emission plane"):
+        trace_photons(scene.surface, LIGHT, X - [0, 0, 0.1], intensity=1.0, area=1.0, receiver_z=-1.0)
+    with pytest.raises(ValueError, match="below the surface"):
+        trace_photons(scene.surface, LIGHT, X, intensity=1.0, area=1.0, receiver_z=0.5)
+    with pytest.raises(ValueError, match="area"):
+        trace_photons(scene.surface, LIGHT, X, intensity=1.0, area=[1.0, -1.0], receiver_z=-1.0)
