@@ -44,8 +44,10 @@ import numpy as np  # noqa: E402
 from caustics_jax import Newton, Walk, prepare, solve  # noqa: E402
 from caustics_jax.app import compare  # noqa: E402
 from caustics_jax.runtime.compilation import XLA_OPTIONS, using_xla_options  # noqa: E402
-from caustics_jax.runtime.pools import pool_slots, run_pools  # noqa: E402
-from caustics_jax.solvers.walk import BISECT, DONE, WALK, walk_init, walk_turn_back  # noqa: E402
+from caustics_jax.runtime.lane_solver import pool_widths, stage_lane  # noqa: E402
+from caustics_jax.runtime.pools import run_pools  # noqa: E402
+from caustics_jax.solvers.walk import WalkLane, WalkSolver  # noqa: E402
+from caustics_jax.solvers.walk_steps import BISECT, DONE, WALK  # noqa: E402
 from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
 
 CONFIGS = {"walk": Walk(), "newton-hv-step": Newton(stepping="one_step"), "newton-hv": Newton()}
@@ -80,23 +82,23 @@ def scheduler_alone(prep, P, L, sol, repeats: int) -> dict:
     docstring). Each lane needs `crossed` WALK steps then the rest of its `iterations` as
     BISECT steps, as the walk's solve `sol` took them; the counts ride in the state's
     `crossed` and `side` fields, and the two passes with the turn-back between them are
-    the walk's (`walk._walk_pool`)."""
+    the walk's (`walk.WalkSolver`: its records, restart and pool widths)."""
     mesh, dtype = prep.padded, prep.dtype
     solver = Walk()
     eta, tol = jnp.asarray(1.333, dtype), jnp.asarray(solver.tolerance(dtype), dtype)
     P, L = jnp.asarray(P), jnp.asarray(L)
     face, ab0, found = prep.start_points(P, L)
-    lanes = jax.jit(jax.vmap(lambda p, l, f, a, ok: walk_init(mesh, p, l, f, a, ok, eta, tol, solver)[0]))(
-        P, L, face, ab0, found)
+    walk = WalkSolver(mesh, eta, tol, jnp.int32(solver.max_steps), solver)
+    records = jax.jit(jax.vmap(lambda lane: stage_lane(walk, lane)))(WalkLane(P, L, face, ab0, found))
     steps = np.asarray(sol.iterations)
     need_w = jnp.asarray(np.minimum(np.asarray(sol.crossed), steps), jnp.int32)
     need_b = jnp.asarray(steps, jnp.int32) - need_w
 
-    def program(lanes, need_w, need_b):
-        s = lanes.state
+    def program(records, need_w, need_b):
+        s = records.lane.state
         mode = jnp.where(need_w > 0, WALK, jnp.where(need_b > 0, BISECT, DONE)).astype(jnp.int32)
-        lanes = lanes._replace(state=s._replace(mode=mode, steps=jnp.zeros_like(s.steps), crossed=need_w,
-                                                side=need_b))
+        records = records._replace(lane=records.lane._replace(state=s._replace(
+            mode=mode, steps=jnp.zeros_like(s.steps), crossed=need_w, side=need_b)))
 
         def count(lane):
             s = lane.state
@@ -107,14 +109,14 @@ def scheduler_alone(prep, P, L, sol, repeats: int) -> dict:
         def route(lane):
             return jnp.where(lane.state.mode != DONE, lane.state.mode, -1).astype(jnp.int32)
 
-        def walk_pass(_, lanes):  # as `walk._walk_pool`: turn back between two passes
-            lanes = jax.vmap(walk_turn_back)(lanes)
-            moving = lanes._replace(turned=None, can_flip=None, other=None)
-            return lanes._replace(state=run_pools((count, count), route, moving, pool_slots()).state)
+        def walk_pass(_, records):  # as `lane_solver.run_lanes`: the turn-back between two passes
+            records = jax.vmap(walk.restart)(records)
+            moved = run_pools((count,) * 3, route, jax.vmap(walk.moving)(records), pool_widths(walk))
+            return jax.vmap(walk.settle)(records, moved)
 
-        return jax.lax.fori_loop(0, 2, walk_pass, lanes)
+        return jax.lax.fori_loop(0, 2, walk_pass, records)
 
-    args = (lanes, need_w, need_b)
+    args = (records, need_w, need_b)
     compiled = {}
     for key, options in OPTION_SETS.items():
         compiled[key] = jax.jit(program, compiler_options=options or None).lower(*args).compile()

@@ -22,7 +22,7 @@
 #   needs (its first triangle, its own steps), **executed** FLOPs what the schedule makes
 #   the machine do (every lane's ellipse samples under the chunked scheduler, each chunk
 #   until its slowest lane, the pool's idle slots while it drains: the pool's loop trips
-#   are replayed on the host from the lanes' step counts, exactly as `pools.run_pool`
+#   are replayed on the host from the lanes' step counts, exactly as `pools.run_pools`
 #   refills its slots);
 # - the machine's practical peak: a jitted element-wise fused multiply-add loop in the
 #   same process, per dtype.
@@ -53,9 +53,11 @@ import numpy as np  # noqa: E402
 from caustics_jax import Newton, Walk, prepare, solve  # noqa: E402
 from caustics_jax.app import compare  # noqa: E402
 from caustics_jax.runtime.blocks import lanes_per_block  # noqa: E402
+from caustics_jax.runtime.lane_solver import pool_widths, stage_lane  # noqa: E402
 from caustics_jax.runtime.pools import pool_slots  # noqa: E402
-from caustics_jax.solvers.newton import newton_init, newton_iteration  # noqa: E402
-from caustics_jax.solvers.walk import BISECT, WALK, walk_advance, walk_ellipse, walk_init  # noqa: E402
+from caustics_jax.solvers.newton import NewtonSolver, newton_init, newton_iteration  # noqa: E402
+from caustics_jax.solvers.walk import WalkLane, WalkSolver  # noqa: E402
+from caustics_jax.solvers.walk_steps import BISECT, WALK  # noqa: E402
 from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
 
 CONFIGS = {
@@ -125,18 +127,20 @@ def lane_flops(solver, mesh, P, L, start, eta: float = 1.333) -> dict:
     face, ab0, found = start
     P, L = P[:WIDTH], L[:WIDTH]
     if isinstance(solver, Walk):
-        def init(ellipse):
-            def first(p, l, f, a, ok):
-                lane, _, samples = walk_init(mesh, p, l, f, a, ok, eta, tol, solver)
-                # with the ellipse samples: what the chunked scheduler computes for every lane
-                return walk_ellipse(mesh, eta, solver, lane, samples) if ellipse else lane
-            return first
-        lanes = jax.jit(jax.vmap(init(False)))(P, L, face, ab0, found)
-        return {"init": _flops(init(False), P, L, face, ab0, found),
-                "init_full": _flops(init(True), P, L, face, ab0, found),
-                "step": _flops(lambda c: walk_advance(mesh, eta, tol, solver, c), lanes),
-                "step_walk": _flops(lambda c: walk_advance(mesh, eta, tol, solver, c, WALK), lanes),
-                "step_bisect": _flops(lambda c: walk_advance(mesh, eta, tol, solver, c, BISECT), lanes)}
+        walk = WalkSolver(mesh, eta, tol, jnp.int32(solver.max_steps), solver)
+        lean, _, walks, ellipse = walk.stages()
+        # Each stage alone, as the runtime stores each stage's record before the next
+        # reads it (one program of all of them would count XLA's fusion copies).
+        lane = WalkLane(P, L, face, ab0, found)
+        first = jax.jit(jax.vmap(lean.fn))(lane)
+        records = jax.jit(jax.vmap(walks.fn))(first)
+        moving = jax.vmap(walk.moving)(records)
+        init = _flops(lean.fn, lane) + _flops(walks.fn, first)
+        # with the ellipse samples: what a lane whose curve has no edge crossing adds
+        return {"init": init, "init_full": init + _flops(ellipse.fn, records),
+                "step": _flops(lambda m: walk.step(m, None), moving),
+                "step_walk": _flops(lambda m: walk.step(m, WALK), moving),
+                "step_bisect": _flops(lambda m: walk.step(m, BISECT), moving)}
     if solver.stepping == "converge":
         return None  # optimistix's inner loop: XLA counts a loop body once (module docstring)
     beta0 = jnp.asarray(solver.initial_step, dtype)
@@ -147,21 +151,24 @@ def lane_flops(solver, mesh, P, L, start, eta: float = 1.333) -> dict:
             "step": _flops(lambda p, l, s: newton_iteration(mesh, p, l, eta, tol, solver, s), P, L, states)}
 
 
-def pool_trips(phases: np.ndarray, slots: int) -> np.ndarray:
+def pool_trips(phases: np.ndarray, widths: tuple[int, ...]) -> np.ndarray:
     """Loop trips of `pools.run_pools`, replayed: `phases` `(lanes, K)` holds how many steps
     each lane needs in pool 0, then pool 1, ... (in queue order; a lane visits the pools
     in that order). Each trip steps every pool with a busy slot; a lane whose phase ends
     is queued for its next pool; free slots refill from their pool's queue. Returns the
-    trips in which each pool stepped (`(K,)`; `run_pool` is `K = 1`)."""
+    trips in which each pool stepped (`(K,)`)."""
     lanes, K = phases.shape
+    slots = max(widths)
     queues = [list(np.flatnonzero((phases[:, k] > 0) & (phases[:, :k].sum(1) == 0))) for k in range(K)]
     slot_lane = np.full((K, slots), -1)
+    for k in range(K):  # pool k has widths[k] slots: the others never take a lane
+        slot_lane[k, widths[k]:] = -2
     left = np.zeros((K, slots), np.int64)
     heads = [0] * K
     stepped = np.zeros(K, np.int64)
 
     def refill(k):
-        for i in np.flatnonzero(slot_lane[k] < 0):
+        for i in np.flatnonzero(slot_lane[k] == -1):
             if heads[k] >= len(queues[k]):
                 break
             lane = queues[k][heads[k]]
@@ -194,8 +201,9 @@ def ellipse_lanes(solver, mesh, P, L, start, eta: float = 1.333) -> np.ndarray:
         return np.zeros(P.shape[0], bool)
     dtype = mesh.dtype
     eta, tol = jnp.asarray(eta, dtype), jnp.asarray(solver.tolerance(dtype), dtype)
-    fn = jax.jit(jax.vmap(lambda p, l, f, a, ok: walk_init(mesh, p, l, f, a, ok, eta, tol, solver)[1]))
-    return np.asarray(fn(P, L, *start)) & np.asarray(start[2])
+    walk = WalkSolver(mesh, eta, tol, jnp.int32(solver.max_steps), solver)
+    fn = jax.jit(jax.vmap(lambda lane: stage_lane(walk, lane).is_ellipse))
+    return np.asarray(fn(WalkLane(P, L, *start))) & np.asarray(start[2])
 
 
 def executed_and_useful(solver, flops: dict | None, sol, ellipse: np.ndarray, block: int) -> dict:
@@ -226,13 +234,14 @@ def executed_and_useful(solver, flops: dict | None, sol, ellipse: np.ndarray, bl
         if solver.scheduler == "chunked":  # every lane's full first triangle; chunks until their slowest lane
             executed += block * flops["init_full"] + WIDTH * s.reshape(-1, WIDTH).max(1).sum() * flops["step"]
             continue
-        trips = pool_trips(ph, pool_slots())
+        widths = pool_widths(WalkSolver if walk else NewtonSolver)
+        trips = pool_trips(ph, widths[:ph.shape[1]])
         if walk:  # first triangles and ellipses on the compacted lanes (`pools.map_where`); two pools
             executed += -(-int(f.sum()) // WIDTH) * WIDTH * flops["init"]
             executed += -(-int(e.sum()) // WIDTH) * WIDTH * flops["init_full"]
-            executed += pool_slots() * (trips[0] * flops["step_walk"] + trips[1] * flops["step_bisect"])
+            executed += widths[0] * trips[0] * flops["step_walk"] + widths[1] * trips[1] * flops["step_bisect"]
         else:
-            executed += block * flops["init"] + pool_slots() * trips[0] * flops["step"]
+            executed += block * flops["init"] + widths[0] * trips[0] * flops["step"]
     return {"useful": useful, "executed": executed}
 
 

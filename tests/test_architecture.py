@@ -82,6 +82,21 @@ def test_the_package_root_holds_at_most_eight_modules():
     assert len(root) <= 8, root
 
 
+#: Lines a module named for the walk may hold (issue 32: the walk's method, not its scheduling).
+WALK_MODULE_LINES = 500
+
+
+def test_every_module_named_for_the_walk_reads_within_500_lines():
+    """`solvers/walk*.py` and the GLSL `walk*.glsl`: the paper's section, its scheduling in
+    the runtime (`runtime.lane_solver`)."""
+    files = sorted((ROOT / "caustics_jax").rglob("*walk*.*"))
+    files = [f for f in files if f.suffix in (".py", ".glsl")]
+    assert len(files) >= 4, files  # walk.py, walk_start.py, walk_steps.py, walk.glsl
+    long = {f.relative_to(ROOT).as_posix(): n for f in files
+            if (n := len(f.read_text().splitlines())) > WALK_MODULE_LINES}
+    assert not long, long
+
+
 def test_no_public_name_of_a_package_hides_one_of_its_modules():
     """`cj.start_points` is a function and `caustics_jax.start_points` no module: a package's
     attribute named like one of its submodules must be that submodule (STYLE.md)."""

@@ -156,7 +156,7 @@ def test_flat_closed_form_matches_the_independent_flat_interface_reference(dtype
 def test_lanes_that_need_no_solve_never_enter_the_solver(monkeypatch):
     """The walk steps only lanes with a start point, and none on a flat pool: lanes come in
     one fixed-size block (`blocks.lanes_per_block`), the others marked not found, which the
-    pool scheduler never steps (`walk._walk_pool` maps only the found lanes)."""
+    pool scheduler never steps (`WalkSolver.stages` map only the found lanes)."""
     seen = []
     solve_walk = _solve.solve_walk
 

@@ -7,6 +7,7 @@ under the point light of `scenes.wavy_pool`) on a 2048-triangle pool in both dty
 """
 
 import functools
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +17,8 @@ import pytest
 from caustics_jax import Newton, Walk, scenes, solve
 from caustics_jax.runtime import compilation
 from caustics_jax.runtime.blocks import run_blocks
-from caustics_jax.runtime.pools import map_where, run_pool, run_pools
+from caustics_jax.runtime.lane_solver import SCHEDULERS, LaneSolver, Stage, run_lanes
+from caustics_jax.runtime.pools import map_where, run_pools
 from caustics_jax.testing import assert_same_lanes
 
 DTYPES = ["float32", "float64"]
@@ -70,30 +72,88 @@ def test_slot_pool_gives_the_lanes_of_the_chunked_scheduler(solver, dtype):
     assert_same_lanes(jax.tree.map(lambda x: x[keep], pool), jax.tree.map(lambda x: x[keep], chunked), FIELDS)
 
 
-def test_run_pool_equals_a_per_lane_while_loop():
-    """Lanes need 0 to 40 steps; 8 slots serve 300 lanes. Every lane ends exactly as in its
-    own loop, and lanes that are not running come back untouched."""
+class _Toy(LaneSolver):
+    """A lane solver in integers (exact at any vector width): stages that double `x`, set
+    `y` only where `x` is odd (kept elsewhere) and draw `z` only where `x > 50` (zeros
+    elsewhere: the whole record, so those lanes take no step); two phases chosen by the
+    parity of `x`; two passes, the second restarting the lanes whose `x` ended above 100
+    (once). Only `(x, k, n)` move through the pools."""
+
+    phases: ClassVar[tuple[str, ...]] = ("even", "odd")
+    passes: ClassVar[int] = 2
+    pool_shares: ClassVar[tuple[float, ...]] = (1.0, 0.5)
+
+    def stages(self):
+        def double(c):
+            return {**c, "x": 2 * c["x"] + c["n"] % 2}
+
+        return (Stage(double),
+                Stage(lambda c: {**c, "y": c["x"] * 7 + 1}, when=lambda c: c["x"] % 2 == 1, keep=True),
+                Stage(lambda c: {**c, "z": c["x"] - 50}, when=lambda c: c["x"] > 50))
+
+    def route(self, m):
+        return jnp.where(m["k"] < m["n"], m["x"] % 2, -1).astype(jnp.int32)
+
+    def step(self, m, phase):
+        even = {**m, "x": (m["x"] // 2 + 5) % 1009, "k": m["k"] + 1}
+        odd = {**m, "x": (3 * m["x"] + 1) % 1013, "k": m["k"] + 1}
+        if phase is None:
+            return jax.tree.map(lambda a, b: jnp.where(m["x"] % 2 == 0, a, b), even, odd)
+        return even if phase == 0 else odd
+
+    def restart(self, c):
+        again = (c["x"] > 100) & ~c["again"]
+        return {**c, "n": jnp.where(again, c["n"] + 3, c["n"]), "again": c["again"] | again}
+
+    def moving(self, c):
+        return {"x": c["x"], "k": c["k"], "n": c["n"]}
+
+    def settle(self, c, m):
+        return {**c, **m}
+
+    def finish(self, c):
+        return c
+
+
+def test_run_lanes_gives_each_lane_its_own_loop_under_both_schedulers():
+    """`runtime.lane_solver.run_lanes`: every lane ends as in a per-lane program of its
+    stages, its steps and its restart, under the pool scheduler (pools of unequal widths,
+    8 and 4 slots for 300 lanes) and the chunked one; the `when` stages touch only their
+    lanes (kept, or zeros elsewhere)."""
     rng = np.random.default_rng(0)
-    need = jnp.asarray(rng.integers(0, 41, 300), jnp.int32)
-    x0 = jnp.asarray(rng.integers(0, 1000, (300, 2)), jnp.int32)
+    n = 300
+    lanes = {"x": jnp.asarray(rng.integers(0, 60, n), jnp.int32), "n": jnp.asarray(rng.integers(0, 30, n), jnp.int32),
+             "k": jnp.zeros(n, jnp.int32), "y": jnp.full(n, -1, jnp.int32), "z": jnp.full(n, -1, jnp.int32),
+             "again": jnp.zeros(n, bool)}
 
-    def step(c):  # integer arithmetic: exact at any vector width
-        x, k, n = c
-        x = jnp.stack([(3 * x[0] + x[1]) % 10007, (x[1] + k * x[0]) % 10009])
-        return (x, k + 1, n), k + 1 >= n
+    def alone(c):
+        c = {**c, "x": 2 * c["x"] + c["n"] % 2}
+        c = {**c, "y": jnp.where(c["x"] % 2 == 1, c["x"] * 7 + 1, c["y"])}
+        drawn = c["x"] > 50
+        c = jax.tree.map(lambda v: jnp.where(drawn, v, jnp.zeros_like(v)), {**c, "z": c["x"] - 50})
+        for _ in range(2):
+            again = (c["x"] > 100) & ~c["again"]
+            c = {**c, "n": jnp.where(again, c["n"] + 3, c["n"]), "again": c["again"] | again}
+            c = jax.lax.while_loop(lambda c: c["k"] < c["n"], lambda c: jax.lax.cond(
+                c["x"] % 2 == 0, lambda c: {**c, "x": (c["x"] // 2 + 5) % 1009, "k": c["k"] + 1},
+                lambda c: {**c, "x": (3 * c["x"] + 1) % 1013, "k": c["k"] + 1}, c), c)
+        return c
 
-    def alone(x, n):
-        return jax.lax.while_loop(lambda c: c[1] < c[2], lambda c: step(c)[0], (x, jnp.int32(0), n))
-
-    want = jax.vmap(alone)(x0, need)
-    got = jax.jit(lambda s, r: run_pool(step, s, r, 8))((x0, jnp.zeros(300, jnp.int32), need), need > 0)
-    for w, g in zip(want, got, strict=True):
-        np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
-    np.testing.assert_array_equal(np.asarray(got[1]), np.asarray(need))
+    want = jax.vmap(alone)(lanes)
+    assert 0 < int(np.sum(np.asarray(want["again"]))) < n and 0 < int(np.sum(np.asarray(want["z"]) == 0)) < n
+    for scheduler in SCHEDULERS:
+        got = jax.jit(lambda x, s=scheduler: run_lanes(_Toy(), x, scheduler=s, slots=8))(lanes)
+        for key in lanes:
+            np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), err_msg=f"{scheduler} {key}")
 
 
-def test_run_pool_moves_lanes_of_every_dtype_and_shape_exactly():
-    """The pool moves lanes as one matrix per dtype (bools with the integers): a state of
+def test_an_unknown_scheduler_is_refused():
+    with pytest.raises(ValueError, match="scheduler must be one of"):
+        run_lanes(_Toy(), {"x": jnp.zeros(4, jnp.int32)}, scheduler="fifo")
+
+
+def test_run_pools_moves_lanes_of_every_dtype_and_shape_exactly():
+    """A pool moves lanes as one matrix per dtype (bools with the integers): a state of
     bools, int32, float32 matrices and an empty leaf comes back exactly as per-lane loops
     leave it (the float updates are small integers: exact at any vector width)."""
     rng = np.random.default_rng(1)
@@ -105,15 +165,14 @@ def test_run_pool_moves_lanes_of_every_dtype_and_shape_exactly():
     def advance(c):
         return {**c, "flag": ~c["flag"], "k": c["k"] + 1, "m": c["m"] * 2 - c["k"].astype(jnp.float32)}
 
-    def step(c):
-        c = advance(c)
-        return c, c["k"] >= c["n"]
+    def route(c):
+        return jnp.where(c["k"] < c["n"], 0, -1).astype(jnp.int32)
 
     def alone(c):
         return jax.lax.while_loop(lambda c: c["k"] < c["n"], advance, c)
 
     want = jax.vmap(alone)(state)
-    got = jax.jit(lambda s, r: run_pool(step, s, r, 16))(state, need > 0)
+    got = jax.jit(lambda s: run_pools((advance,), route, s, 16))(state)
     for key in state:
         assert got[key].dtype == state[key].dtype and got[key].shape == state[key].shape, key
         np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), err_msg=key)

@@ -141,7 +141,7 @@ def test_glsl_solvers_conform_on_every_scene(scenes, scene, solver):
     # a sign: the f carried to the next face's entry negated (every bracket test there
     # reads it). The tangent oriented outward at an entry point, the sign this case had
     # flipped, is seen by no lane of these scenes since a chord cut no longer stalls in phi
-    # (walk._bisect_update): the exit is the arc's one other edge root either way, and the
+    # (walk_steps._bisect_update): the exit is the arc's one other edge root either way, and the
     # chord cuts do not read the pencil frame; neither is a second direction along +t0.
     ("walk.glsl", "s.f_exit = fx;", "s.f_exit = -fx;"),
     # the bracket end the cut replaces

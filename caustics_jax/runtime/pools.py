@@ -1,10 +1,11 @@
-"""The slot-pool scheduler: lanes stepped in a fixed pool of slots refilled from a queue
-(`run_pool`, `run_pools`), and work on the compacted lanes that need it (`map_where`).
+"""The slot-pool scheduler: lanes stepped in fixed pools of slots refilled from queues
+(`run_pools`), and work on the compacted lanes that need it (`map_where`); the lane-solver
+protocol (`lane_solver.run_lanes`) schedules every solver with them.
 
-Inside a block, a vmapped `while_loop` runs until its slowest lane ends. `run_pool`
-avoids that waste: a fixed pool of slots (`pool_slots`, sized to the backend) steps the
-lanes in flight, and a slot whose lane ended takes the next unfinished lane from a queue,
-so every step advances `slots` live lanes until the queue is empty. Work that few lanes
+Inside a block, a vmapped `while_loop` runs until its slowest lane ends. `run_pools`
+avoids that waste: a fixed pool of slots (`pool_slots`, sized to the backend) per kind of
+step steps the lanes in flight, and a slot whose lane ended or moved on takes the next
+lane from its queue, so every step advances live lanes until the queues are empty. Work that few lanes
 need (`map_where`) runs on the compacted lanes that need it, in chunks, so its cost is
 proportional to those lanes.
 """
@@ -20,7 +21,8 @@ from .lanes import LanePacking, select_lanes, take_rows
 
 
 def pool_slots(platform: str | None = None) -> int:
-    """Lanes in flight per device in `run_pool` (env `CAUSTICS_JAX_POOL_SLOTS`).
+    """Lanes in flight per device and pool in `run_pools` (env `CAUSTICS_JAX_POOL_SLOTS`;
+    a lane solver's `pool_shares` scale it per phase).
 
     CPU: 256, the chunk width of `map_lanes`, so both schedulers run the same vmapped
     step and give the same results (the 4096 lanes of `tests/test_scheduling.py` bit-identical,
@@ -41,51 +43,16 @@ def pool_slots(platform: str | None = None) -> int:
     return 8192 if platform == "tpu" else 256
 
 
-def run_pool(step, states, running, slots: int):
-    """Step every running lane until it ends, `slots` lanes at a time (inside jit).
-
-    `states`: a pytree of per-lane states with a leading lane axis `n`; `running` `(n,)`:
-    the lanes that need steps (the others are returned unchanged). `step(state) ->
-    (state, done)` advances one lane (vmapped over the slots). A slot whose lane is done
-    writes it back and takes the next running lane from the queue; the loop ends when the
-    queue is empty and every slot is idle. Each lane sees exactly the `step` calls it
-    would see alone, so the results are those of a per-lane `while_loop`; the vmapped
-    step runs on `slots` lanes in flight (idle slots only in the final drain), instead
-    of a chunk waiting for its slowest lane.
-    """
-    n = running.shape[0]
-    slots = min(slots, n)
-    queue = jnp.nonzero(running, size=n, fill_value=n)[0].astype(jnp.int32)  # n: none left
-    lane = queue[:slots]
-    packing = LanePacking(states)
-
-    def body(carry):
-        states, lane, slot, head = carry
-        stepped, done = jax.vmap(step)(packing.unpack(slot))
-        slot = packing.pack(stepped)
-        finished = (lane < n) & done
-        states = tuple(x.at[jnp.where(finished, lane, n)].set(s, mode="drop") for x, s in zip(states, slot,
-                                                                                              strict=True))
-        pos = head + jnp.cumsum(finished, dtype=jnp.int32) - 1  # queue position of each refill
-        refill = jnp.where(pos < n, queue[jnp.clip(pos, 0, n - 1)], n)
-        lane = jnp.where(finished, refill, lane)
-        slot = select_lanes(finished, take_rows(states, lane), slot)
-        return states, lane, slot, head + jnp.sum(finished, dtype=jnp.int32)
-
-    packed = packing.pack(states)
-    carry = (packed, lane, take_rows(packed, lane), jnp.int32(slots))
-    return packing.unpack(jax.lax.while_loop(lambda c: jnp.any(c[1] < n), body, carry)[0])
-
-
-def run_pools(steps: tuple, route, states, slots: int):
-    """`run_pool` with one pool per kind of step: a lane runs in the pool its state routes
-    it to, so each step computes only its own branch (inside jit).
+def run_pools(steps: tuple, route, states, slots: int | tuple[int, ...]):
+    """Step every lane until it is done, in one slot pool per kind of step: a lane runs in
+    the pool its state routes it to, so each step computes only its own branch (inside jit).
 
     `steps[k](state) -> state` is the step of pool `k`; `route(state)` is the pool a lane
     needs next (int32 in `[0, len(steps))`), or -1 once it is done. Each pool has `slots`
-    slots and a ring-buffer queue of the lanes routed to it; after every trip the lanes
-    whose route changed are written back and queued for their next pool (or leave when
-    done), and every pool refills its free slots from its queue. A pool without a busy
+    slots (or `slots[k]`: pools sized to their demand) and a ring-buffer queue of the
+    lanes routed to it; after every trip the lanes whose route changed are written back
+    and queued for their next pool (or leave when done), and every pool refills its free
+    slots from its queue. A pool without a busy
     slot skips its step (`lax.cond`). A lane sees the same sequence of steps as in a
     per-lane loop that branches on its state, so the results are those of that loop; a
     branch that few lanes need costs only those lanes' slots.
@@ -93,7 +60,7 @@ def run_pools(steps: tuple, route, states, slots: int):
     """
     n = jax.tree.leaves(states)[0].shape[0]
     K = len(steps)
-    slots = min(slots, n)
+    widths = [min(w, n) for w in (slots if isinstance(slots, tuple) else (slots,) * K)]
     first = jax.vmap(route)(states)
     packing = LanePacking(states)
     states = packing.pack(states)
@@ -102,8 +69,8 @@ def run_pools(steps: tuple, route, states, slots: int):
         members = first == k
         bufs.append(jnp.nonzero(members, size=n, fill_value=n)[0].astype(jnp.int32))
         tails.append(jnp.sum(members, dtype=jnp.int32))
-        lanes_.append(jnp.where(jnp.arange(slots) < tails[k], bufs[k][:slots], n))
-    heads = [jnp.minimum(jnp.int32(slots), t) for t in tails]
+        lanes_.append(jnp.where(jnp.arange(widths[k]) < tails[k], bufs[k][:widths[k]], n))
+    heads = [jnp.minimum(jnp.int32(widths[k]), t) for k, t in enumerate(tails)]
     carry = (states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_),
              tuple(take_rows(states, lane) for lane in lanes_))
 

@@ -185,7 +185,7 @@ void cj_newton_step(vec3 P, vec3 L, float eta, float tol, inout NewtonState s) {
     s.beta = beta;
 }
 
-// newton._newton_lane with newton_init and _finish: the lane's end state and f there.
+// newton.NewtonSolver (newton_init, newton_iteration, _finish): the lane's end state and f there.
 NewtonState cj_newton(vec3 P, vec3 L, int face, vec2 ab0, float eta, float tol, int max_iterations, float beta0,
                       out float f_end) {
     NewtonState s;

@@ -64,14 +64,14 @@ void cj_objective(Frame fr, vec3 P, vec3 L, vec2 ab, float eta, out float f, out
     cj_bracket_objective(fr.V, fr.N, P, L, ab, eta, f, st, g);
 }
 
-// -w_P . n_s at ab: the cosine of incidence on P's side (walk._cos_at_P).
+// -w_P . n_s at ab: the cosine of incidence on P's side (walk_start._cos_at_P).
 float cj_cos_at_P(Frame fr, vec3 P, vec3 L, vec2 ab) {
     vec3 M, n_s, w_P, w_L;
     cj_path_vectors(fr.V, fr.N, P, L, ab, M, n_s, w_P, w_L);
     return -dot(w_P, n_s);
 }
 
-// One direction of travel from M0 (walk._first_triangle's `direction`).
+// One direction of travel from M0 (walk_start.first_triangle's `direction`).
 struct Direction {
     bool ok;
     int k;
@@ -84,7 +84,7 @@ struct Direction {
     float room;
 };
 
-// The near point of a direction whose exit is known (walk._first_triangle's `direction`).
+// The near point of a direction whose exit is known (walk_start.first_triangle's `direction`).
 Direction cj_direction_near(float coef[6], vec2 ab0, Direction d) {
     d.room = cj_norm2(d.ab - ab0);
     float delta = d.ok ? min(CJ_DELTA0, 0.25 * d.room) : CJ_DELTA0;
@@ -121,7 +121,7 @@ Direction cj_direction_lean(float coef[6], int edges[2], float t[2], vec2 ab[2],
     return cj_direction_near(coef, ab0, d);
 }
 
-// The initial state of one of the two walks from M0 (walk._start_states's `build`).
+// The initial state of one of the two walks from M0 (walk_start.start_states's `build`).
 WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direction dp, Direction dm,
                    float f0, uint st0, bool singular, float fp, float fm, uint stp, uint stm, float gp, float gm,
                    uint st_np, uint st_nm,
@@ -131,8 +131,8 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     WalkState s;
     bool bracket = is_ellipse ? ellipse_bracket : (br_p || br_m);
     bool use_m = use_m_bracket || (!(br_p || br_m) && walk_m);
-    // No sign change, and the arc of the walk direction runs into TIR (or BACKWARD, walk.py's
-    // _first_triangle): search it towards the onset first; without a root there the walk
+    // No sign change, and the arc of the walk direction runs into TIR (or BACKWARD, walk_start.py's
+    // first_triangle): search it towards the onset first; without a root there the walk
     // goes on (tir_end = 2).
     bool lost_m = stm == CJ_TIR || stm == CJ_BACKWARD, lost_p = stp == CJ_TIR || stp == CJ_BACKWARD;
     bool tir_arc = walk_m ? (dm.ok && st_nm == CJ_OK && lost_m) : (dp.ok && st_np == CJ_OK && lost_p);
@@ -182,7 +182,7 @@ WalkState cj_build(bool walk_m, int face, vec2 ab0, bool found, float tol, Direc
     return s;
 }
 
-// The two initial states from M0 (walk._first_triangle, walk._start_states): `state` walks the chosen way,
+// The two initial states from M0 (walk_start.first_triangle, walk_start.start_states): `state` walks the chosen way,
 // `other` the other way; can_flip says whether that second way exists.
 void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta, float tol, int n_ellipse,
                        out bool can_flip, out WalkState state, out WalkState other) {
@@ -190,7 +190,7 @@ void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta
     vec2 t0 = cj_conic_tangent(fr.coef, ab0);
     bool singular = dot(t0, t0) == 0.0;
     // The exits from the vertex signs (cj_boundary_crossings) where they decide and M0 is
-    // neither crossing; else the pencil order over six edge roots (walk._first_triangle).
+    // neither crossing; else the pencil order over six edge roots (walk_start.first_triangle).
     int b_edge[2];
     float b_t[2], b_dist[2], b_scale[2];
     vec2 b_ab[2];
@@ -296,7 +296,7 @@ void cj_first_triangle(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta
 }
 
 // Cross into face g at e (entry edge k_in); bracket if f changes sign on its arc, else
-// schedule the next crossing (walk._walk_geometry and _walk_update).
+// schedule the next crossing (walk_steps._walk_geometry and _walk_update).
 WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     bool from_m0 = s.phi_hi == 0.0;  // this crossing enters the neighbour at M0 (cj_leaving_at_start)
     int k_in;
@@ -320,7 +320,7 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     float tt, phi;
     vec2 ab;
     // The exit from the vertex signs (cj_sign_test_exit); where they do not decide, the exact
-    // construction over six edge roots (walk._lean_walk_branch, the EXACT phase).
+    // construction over six edge roots (walk_steps._lean_walk_branch, the EXACT phase).
     bool ok = cj_sign_test_exit(fr.coef, k_in, t_in, k, tt, ab);
     if (ok) {
         vec2 v = ab - e;
@@ -334,7 +334,7 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     }
 
     // At the entry, f is the previous exit's (the same curve point: the two faces' normals
-    // agree on their shared edge); only the exit is evaluated (walk._walk_update).
+    // agree on their shared edge); only the exit is evaluated (walk_steps._walk_update).
     float f_e = s.f_exit, g_e = s.g_exit, fx, gx;
     uint st_e = s.st_exit, stx;
     cj_objective(fr, P, L, ab, eta, fx, stx, gx);
@@ -342,7 +342,7 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     bool found_e = e_ok && abs(f_e) <= tol;
     bool found_x = ok && x_ok && abs(fx) <= tol;
     // Entering the neighbour at M0 itself (exit angle 0, cj_leaving_at_start): g is undefined
-    // on the line PL, so a sign change of f alone brackets (walk._walk_update).
+    // on the line PL, so a sign change of f alone brackets (walk_steps._walk_update).
     bool bracket = ok && e_ok && x_ok && (cj_root_between(f_e, g_e, fx, gx) || (from_m0 && cj_opposite(f_e, fx)));
     bool lost = !ok || side == 0.0;
     // An arc from a transmitting point to a totally reflecting one (or back) may hold a root
@@ -380,7 +380,7 @@ WalkState cj_walk_step(WalkState s, vec3 P, vec3 L, float eta, float tol) {
     return s;
 }
 
-// Curve point cut by the conic's normal line at lam along the chord (walk._chord_point).
+// Curve point cut by the conic's normal line at lam along the chord (walk_steps._chord_point).
 vec2 cj_chord_point(float coef[6], vec2 ab_lo, vec2 ab_hi, float lam, out bool ok) {
     vec2 q = ab_lo + lam * (ab_hi - ab_lo);
     vec2 p = cj_project_to_conic(coef, q);
@@ -390,7 +390,7 @@ vec2 cj_chord_point(float coef[6], vec2 ab_lo, vec2 ab_hi, float lam, out bool o
     return p;
 }
 
-// One refinement cut of the bracketed arc (walk._bisect_geometry and _bisect_update).
+// One refinement cut of the bracketed arc (walk_steps._bisect_geometry and _bisect_update).
 WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool illinois) {
     Frame fr = cj_frame(s.face, P, L);
     float denom = s.f_hi - s.f_lo;
@@ -441,7 +441,7 @@ WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool
     // The pencil angle only measures a curved arc; on a straight one (phi = 0 to rounding)
     // the bracket is judged by its end points alone. After a chord cut phi is only derived
     // from the point (its rounding exceeds the threshold on nearly straight arcs): only a
-    // pencil cut stalls in phi (walk._bisect_update).
+    // pencil cut stalls in phi (walk_steps._bisect_update).
     bool curved = max(abs(phi_lo), abs(phi_hi)) > CJ_SQRT_EPS;
     bool stalled = cj_norm2(ab_hi - ab_lo) <= 4.0 * CJ_EPS * max(cj_norm2(ab_hi), 1.0)
                    || (curved && !ok_chord && abs(phi_hi - phi_lo) <= 4.0 * CJ_EPS * max(abs(phi_hi), 1e-30));
@@ -476,7 +476,7 @@ WalkState cj_bisect_step(WalkState s, vec3 P, vec3 L, float eta, float tol, bool
     return s;
 }
 
-// Walk one lane (walk.walk_lane): the final state; MAX_STEPS when max_steps ran out.
+// Walk one lane (walk.WalkSolver's stages and steps): the final state; MAX_STEPS when max_steps ran out.
 WalkState cj_walk(vec3 P, vec3 L, int face, vec2 ab0, bool found, float eta, float tol, int max_steps,
                   bool illinois, int n_ellipse) {
     bool can_flip;

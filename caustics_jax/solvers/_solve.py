@@ -28,12 +28,12 @@ from ..surface.mesh import SurfaceMesh
 from ._solution import Solution, Status
 from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
 from .flat import flat_root, flat_solution
-from .newton import Newton, solve_newton
+from .newton import Newton
 from .options import SolverOptions
 from .sides import warn_if_no_crossing, warn_if_wrong_sides
 from .solution_set import translated
 from .trace import Trace, solve_trace, with_solutions
-from .walk import Walk, solve_walk
+from .walk import Walk
 
 #: `method=` names and their solver classes.
 METHODS: dict[str, type[SolverOptions]] = {"walk": Walk, "newton": Newton, "exhaustive": Exhaustive,
@@ -276,10 +276,10 @@ def _solve_blocks(prep: PreparedSurface, P, L, eta, start, solver, feats: SceneF
     if start is not None:
         fields += [np.asarray(x)[lanes] for x in start]
         fill += [np.int32(-1), np.zeros(2, dtype), False]
-    flat = feats is not None and feats.flat and isinstance(solver, Walk)
+    flat = feats is not None and feats.flat and solver.flat_closed_form
     out = run_blocks(lambda *block: _solve_block(prep, eta, solver, flat, *block), tuple(fields), tuple(fill))
-    if isinstance(solver, Walk) and solver.fallback == "newton":
-        out = _newton_fallback(prep, eta, solver, fields, fill, out)
+    if solver.fallbacks(prep.dtype):
+        out = _fallback(prep, eta, solver, fields, fill, out)
     sol = _empty_fields(n, dtype)
     for k, v in out.items():
         sol[k][lanes] = v
@@ -292,23 +292,19 @@ def _solve_blocks(prep: PreparedSurface, P, L, eta, start, solver, feats: SceneF
 FALLBACK_BLOCK_LANES = 1024
 
 
-def _newton_fallback(prep: PreparedSurface, eta, walk: Walk, fields: list, fill: list, out: dict) -> dict:
-    """`Walk(fallback="newton")`: the lanes with a start point that the walk ended without a
-    path, solved again by the one-step Newton from the same start point and `tol` (then
-    the lanes still without one by the same from the gentle first step 0.1)
-    (docs/solvers.md "Robustness on irregular meshes"); where it finds one, its point,
-    triangle, barycentrics, status and residual replace the walk's, and its iterations
-    and crossings are added to the walk's. Other lanes are untouched."""
+def _fallback(prep: PreparedSurface, eta, solver, fields: list, fill: list, out: dict) -> dict:
+    """The lanes with a start point that `solver` ended without a path, solved again by
+    each of `solver.fallbacks` in turn from the same start point, on those lanes only
+    (`Walk(fallback="newton")`: the one-step Newton, then the same from Cycles' gentle
+    first step 0.1; docs/solvers.md "Robustness on irregular meshes"); where one finds a
+    path, its point, triangle, barycentrics, status and residual replace the lane's, and
+    its iterations and crossings are added to the lane's. Other lanes are untouched."""
     size = FALLBACK_BLOCK_LANES * len(jax.local_devices())
-    tol = walk.tolerance(prep.dtype)
-    # The one-step Newton, then, on the lanes it misses too, the same from Cycles' gentle
-    # first step 0.1 (its MNEE step control): on the steep irregular stress mesh the one
-    # lane in 4,096 that both the walk and the full step lose.
-    for newton in (Newton(stepping="one_step", tol=tol), Newton(stepping="one_step", initial_step=0.1, tol=tol)):
+    for retry_solver in solver.fallbacks(prep.dtype):
         failed = np.flatnonzero((out["status"] != Status.FOUND) & (out["status"] != Status.NO_CROSSING))
         if failed.size == 0:
             break
-        retry = run_blocks(lambda *block, newton=newton: _solve_block(prep, eta, newton, False, *block),
+        retry = run_blocks(lambda *block, r=retry_solver: _solve_block(prep, eta, r, False, *block),
                            tuple(x[failed] for x in fields), tuple(fill), size=size)
         rescued = retry["found"]
         lanes = failed[rescued]
@@ -338,10 +334,7 @@ def _solve_block(prep: PreparedSurface, eta, solver, flat: bool, P, L, lane_id, 
         face, ab0, found = (jax.device_put(x, sharding) for x in start)
     else:
         face, ab0, found = _block_start_points(prep, P, L)
-    if isinstance(solver, Walk):
-        run = lambda need: solve_walk(prep.padded, P, L, eta, (face, ab0, need), solver)  # noqa: E731
-    else:
-        run = lambda need: solve_newton(prep.padded, P, L, eta, (face, ab0, need), solver, lane_id)  # noqa: E731
+    run = lambda need: solver.solve_block(prep.padded, P, L, eta, (face, ab0, need), lane_id)  # noqa: E731
     if not flat:
         return _fields(run(found))
     mesh = prep.mesh

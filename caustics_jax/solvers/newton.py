@@ -34,9 +34,10 @@ triangle, from a key folded with the lane's index (so a lane's starts do not dep
 how lanes are batched or spread over devices); the found solution nearest `M0` is
 returned.
 
-Lanes are scheduled by `pools.run_pool` (default, `scheduler="pool"`: a slot pool refilled
-from a queue of unfinished lanes) or by `lanes.map_lanes` (`"chunked"`: fixed chunks of
-256 lanes, each until its slowest lane); both run the same per-lane iteration.
+`NewtonSolver` is a lane solver (`runtime.lane_solver`): the runtime schedules its lanes
+(`"pool"`, default: a slot pool refilled from a queue of unfinished lanes; `"chunked"`:
+fixed chunks of 256 lanes, each until its slowest lane), as it schedules the walk; both
+run the same per-lane iteration.
 """
 
 from __future__ import annotations
@@ -60,18 +61,17 @@ from ..math.objectives import (
 )
 from ..runtime.arguments import MAX_INT32, check_choice, check_int, check_real, check_tol
 from ..runtime.blocks import on_devices
+from ..runtime.lane_solver import LaneSolver, Stage, run_lanes
 from ..runtime.lanes import map_lanes
-from ..runtime.pools import pool_slots, run_pool
-from ..surface.mesh import cross_edge
+from ..surface.mesh import SurfaceMesh, cross_edge
 from ._solution import Solution, Status, confirm_found
-from .options import SolverOptions, option
+from .options import SolverOptions, option, scheduler_option
 
 __all__ = ["Newton", "solve_newton"]
 
 SOLVERS = ("newton", "chord", "dogleg", "levenberg_marquardt")
 CONSTRAINTS = {"half_vector": half_vector_residual, "angle_difference": angle_difference_residual}
 STEPPING = ("converge", "one_step")
-SCHEDULERS = ("pool", "chunked")
 #: `one_step`: edges the projection may cross in one step before it counts as failed (Cycles
 #: gives its projection ray a bounded number of hits, MNEE_MAX_INTERSECTION_COUNT).
 MAX_PROJECTION_CROSSINGS = 16
@@ -87,7 +87,7 @@ class Newton(SolverOptions):
     constraint: "half_vector" (MNEE) or "angle_difference" (SMS).
     stepping: "converge" (optimistix to convergence in each triangle, then cross) or
         "one_step" (one Newton step, then project back onto the surface, as MNEE/SMS).
-    scheduler: "pool" (slot pool, `pools.run_pool`) or "chunked" (`lanes.map_lanes`).
+    scheduler: "pool" (slot pool) or "chunked" (chunks of 256 lanes), `runtime.lane_solver`.
     tol: acceptance `|f| <= tol` on the signed sine, in `(0, 1)` (None: as the walk). Traced.
     inner_steps: optimistix steps per triangle patch, in `[1, 1024]` ("converge" only).
     max_patches: cap per lane on patches (triangle changes and restarts; "one_step":
@@ -111,13 +111,16 @@ class Newton(SolverOptions):
     n_starts: int = option(1, lambda v: check_int("n_starts", v, 1, 1024))
     seed: int = option(0, lambda v: check_int("seed", v, 0))
     stepping: str = option("converge", lambda v: check_choice("stepping", v, STEPPING))
-    scheduler: str = option("pool", lambda v: check_choice("scheduler", v, SCHEDULERS))
+    scheduler: str = scheduler_option()
     initial_step: float = option(1.0, lambda v: check_real("initial_step", v, 0, 1, lo_open=True))
 
     def __check_init__(self):
         if self.stepping == "one_step" and self.solver != "newton":
             raise ValueError(f"stepping='one_step' takes plain Newton steps (MNEE/SMS): solver must be "
                              f"'newton', got {self.solver!r}")
+
+    def solve_block(self, mesh, P, L, eta, start, lane_id) -> Solution:
+        return solve_newton(mesh, P, L, eta, start, self, lane_id)
 
     def check_dtype(self, dtype) -> None:
         """optimistix 0.1.0's trust-region state is created in the default float dtype, so
@@ -315,32 +318,57 @@ def _finish(mesh, P, L, eta, s: _State):
     return s._replace(status=status.astype(jnp.int32)), f_end
 
 
-def _newton_lane(mesh, P, L, face, ab0, found, eta, tol, max_patches, beta0, options: Newton):
-    """One lane in its own `while_loop` (the "chunked" scheduler vmaps it)."""
-    def step(s):
-        nxt = newton_iteration(mesh, P, L, eta, tol, options, s)
-        return jax.tree.map(lambda n, o: jnp.where(s.done, o, n), nxt, s)
+class NewtonLane(NamedTuple):
+    """A lane's input: receiver, light, start face and barycentrics, whether it has one."""
 
-    init = newton_init(mesh, P, L, face, ab0, found, eta, tol, beta0)
-    s = jax.lax.while_loop(lambda s: ~s.done & (s.patches < max_patches), step, init)
-    return _finish(mesh, P, L, eta, s)
+    P: jax.Array
+    L: jax.Array
+    face: jax.Array
+    ab: jax.Array
+    found: jax.Array
 
 
-def _pooled(mesh, P, L, face, ab, found, eta, tol, max_patches, beta0, options: Newton):
-    """Every lane (flattened over starts) through `pools.run_pool`: the same per-lane iteration."""
-    # (init and finish in `map_lanes` chunks, as the "chunked" scheduler: XLA rounds `f` at
-    # another vector width differently: residuals 3.9e-7 apart in float32, 9e-16 in float64)
-    init = map_lanes(lambda p, l, f, a, ok: newton_init(mesh, p, l, f, a, ok, eta, tol, beta0), P, L, face, ab, found)
+class NewtonRecord(NamedTuple):
+    P: jax.Array
+    L: jax.Array
+    state: _State
 
-    def step(c):
-        p, l, s = c
-        nxt = newton_iteration(mesh, p, l, eta, tol, options, s)
-        nxt = jax.tree.map(lambda n, o: jnp.where(s.done, o, n), nxt, s)
-        return (p, l, nxt), nxt.done | (nxt.patches >= max_patches)
 
-    running = ~init.done & (init.patches < max_patches)
-    _, _, states = run_pool(step, (P, L, init), running, pool_slots())
-    return map_lanes(lambda p, l, s: _finish(mesh, p, l, eta, s), P, L, states)
+class NewtonSolver(LaneSolver):
+    """The Newton baselines as a lane solver (`runtime.lane_solver`): one phase, an
+    iteration (a patch or a projected step) until done or `max_patches`; `finish` reads
+    `f` at the end point. `eta`, `tol`, `max_patches`, `beta0` traced."""
+
+    phases: ClassVar[tuple[str, ...]] = ("iterate",)
+
+    mesh: SurfaceMesh
+    eta: jax.Array
+    tol: jax.Array
+    max_patches: jax.Array
+    beta0: jax.Array
+    options: Newton
+
+    def stages(self) -> tuple[Stage, ...]:
+        def init(x: NewtonLane) -> NewtonRecord:
+            return NewtonRecord(x.P, x.L, newton_init(self.mesh, x.P, x.L, x.face, x.ab, x.found, self.eta, self.tol,
+                                                      self.beta0))
+
+        return (Stage(init, chunked=True),)
+
+    def route(self, rec: NewtonRecord) -> jax.Array:
+        s = rec.state
+        return jnp.where(~s.done & (s.patches < self.max_patches), 0, -1).astype(jnp.int32)
+
+    def step(self, rec: NewtonRecord, phase: int | None) -> NewtonRecord:
+        del phase  # one phase
+        s = rec.state
+        nxt = newton_iteration(self.mesh, rec.P, rec.L, self.eta, self.tol, self.options, s)
+        return rec._replace(state=jax.tree.map(lambda n, o: jnp.where(s.done, o, n), nxt, s))
+
+    def finish(self, rec: NewtonRecord):
+        """`(states, f_end)`: lanes that ran out of patches at a totally reflecting point
+        report TIR; `f` at the end point (in chunks, as the chunked scheduler rounds it)."""
+        return map_lanes(lambda p, l, s: _finish(self.mesh, p, l, self.eta, s), rec.P, rec.L, rec.state)
 
 
 def _newton_block(mesh, eta, tol, max_patches, beta0, P, L, face, ab0, found, lane_id, options: Newton) -> Solution:
@@ -355,15 +383,11 @@ def _newton_block(mesh, eta, tol, max_patches, beta0, P, L, face, ab0, found, la
         starts = jnp.concatenate([ab0[:, None], w[..., 1:]], axis=1)  # (n, S, 2)
     else:
         starts = ab0[:, None]
-    if options.scheduler == "pool":
-        rep = lambda x: jnp.repeat(x, S, axis=0)  # noqa: E731  (lane-major: lane i's starts together)
-        states, f_end = _pooled(mesh, rep(P), rep(L), rep(face), starts.reshape(n * S, 2), rep(found),
-                                eta, tol, max_patches, beta0, options)
-        states, f_end = jax.tree.map(lambda x: x.reshape((n, S) + x.shape[1:]), (states, f_end))
-    else:
-        lane = lambda p, l, f, a, ok: _newton_lane(mesh, p, l, f, a, ok, eta, tol, max_patches, beta0, options)  # noqa: E731
-        per_start = jax.vmap(lambda a: map_lanes(lane, P, L, face, a, found), in_axes=1, out_axes=1)
-        states, f_end = per_start(starts)  # leaves (n, S, ...)
+    rep = lambda x: jnp.repeat(x, S, axis=0)  # noqa: E731  (lane-major: lane i's starts together)
+    solver = NewtonSolver(mesh, eta, tol, max_patches, beta0, options)
+    lanes = NewtonLane(rep(P), rep(L), rep(face), starts.reshape(n * S, 2), rep(found))
+    states, f_end = run_lanes(solver, lanes, scheduler=options.scheduler)
+    states, f_end = jax.tree.map(lambda x: x.reshape((n, S) + x.shape[1:]), (states, f_end))
     V, N = mesh.triangle(states.face)
     points = barycentric_point(V, states.ab)
     V0, _ = mesh.triangle(face)

@@ -23,7 +23,10 @@ from typing import Any, ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 
-__all__ = ["SolverOptions", "default_tol", "option"]
+from ..runtime.arguments import check_choice
+from ..runtime.lane_solver import SCHEDULERS
+
+__all__ = ["SolverOptions", "default_tol", "option", "scheduler_option"]
 
 
 def default_tol(dtype) -> float:
@@ -36,6 +39,12 @@ def option(default, check: Callable[[Any], Any]) -> Any:
     """A solver option: its default and `check(value)`, which returns the canonical value or
     raises a `ValueError` (the `runtime.arguments` checks). Static: part of jit's key."""
     return eqx.field(default=default, converter=check, static=True)
+
+
+def scheduler_option() -> Any:
+    """The `scheduler` option of the lane solvers: how the runtime schedules their lanes
+    (`runtime.lane_solver.SCHEDULERS`: "pool", the default, or "chunked")."""
+    return option("pool", lambda v: check_choice("scheduler", v, SCHEDULERS))
 
 
 class _KnownOptions(type(eqx.Module)):  # type: ignore[misc]
@@ -75,6 +84,19 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
         host options are not the program's)."""
         return self.with_options(**{f.name: f.default for f in dataclasses.fields(self)
                                     if f.name in self.traced + self.host})
+
+    #: Whether `solve` may settle a lane on a flat surface in closed form (docs/features.md).
+    flat_closed_form: ClassVar[bool] = False
+
+    def solve_block(self, mesh, P, L, eta, start, lane_id):
+        """The solver on one block of lanes (`solve` runs every batch in blocks of one size):
+        a `Solution`. Only the block solvers (walk, Newton) have one."""
+        raise NotImplementedError(f"{type(self).__name__} does not solve in blocks")
+
+    def fallbacks(self, dtype) -> tuple[SolverOptions, ...]:
+        """The solvers that retry, in turn, the lanes this one ends without a path (none)."""
+        del dtype
+        return ()
 
     def tolerance(self, dtype) -> float:
         tol = getattr(self, "tol", None)
