@@ -51,6 +51,7 @@ import dataclasses
 import functools
 from typing import ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -67,8 +68,9 @@ from ..curve.arcs import arc_from_point, edge_roots, inward
 from ..math.conic import conic_coefficients, conic_tangent, edge_intersections
 from ..math.objectives import ObjectiveStatus
 from ..runtime.arguments import check_choice, check_int, check_real, check_tol
-from ..runtime.lanes import map_lanes, padded_index, power_of_two_bucket
-from ..surface.mesh import cross_edge
+from ..runtime.lane_solver import LaneSolver, Stage, run_lanes
+from ..runtime.lanes import padded_index, power_of_two_bucket
+from ..surface.mesh import SurfaceMesh, cross_edge
 from ._solution import Status
 from .exhaustive import Exhaustive, candidate_roots
 from .options import SolverOptions, option
@@ -132,27 +134,47 @@ def _snap_to_root(coef, edge, t, ab):
     return jnp.where((edge >= 0) & ok, t_all[e, j], t), jnp.where((edge >= 0) & ok, ab_all[e, j], ab), snapped
 
 
-def _trace_one(mesh, cones, P, L, eta, seed, max_steps, max_arcs):
-    """Follow the curve from one seed; record the arc pieces that may hold a root.
+class TraceSolver(LaneSolver):
+    """Following the curve from one seed as a lane solver (`runtime.lane_solver`): one
+    phase, a triangle of the curve per step (its arc, the pieces that may hold a root, the
+    crossing), until the curve closes, leaves the mesh, is lost, or a cap is reached.
+    A lane is `(P, L, seed)`, `seed = (face, ab, direction, entry_edge, entry_t, stop_face,
+    stop_edge, stop_t)`; `finish` gives `(faces (max_arcs,), pieces ArcPiece (max_arcs,),
+    n_arcs, end, steps)` per lane."""
 
-    `seed`: `(face, ab, direction, entry_edge, entry_t, stop_face, stop_edge, stop_t)`.
-    Returns `(faces (max_arcs,), pieces ArcPiece (max_arcs,), n_arcs, end, steps)`.
-    """
-    face, ab, direction, entry_edge, entry_t, stop_face, stop_edge, stop_t = seed
-    dtype = ab.dtype
-    centre, radius, axis, angle = cones
-    tol_t = 1e3 * jnp.sqrt(jnp.finfo(dtype).eps)
-    empty = ArcPiece(jnp.zeros((max_arcs, 2), dtype), jnp.zeros((max_arcs, 2), dtype),
-                     jnp.zeros((max_arcs, 2), dtype), jnp.zeros(max_arcs, dtype), jnp.zeros(max_arcs, dtype),
-                     jnp.zeros((max_arcs, 2), dtype), jnp.zeros(max_arcs, bool), jnp.zeros(max_arcs, bool))
-    state = (face, ab, direction, entry_edge, entry_t, jnp.int32(0), jnp.int32(0), jnp.int32(_OPEN),
-             jnp.full(max_arcs, -1, jnp.int32), empty)
+    phases: ClassVar[tuple[str, ...]] = ("trace",)
 
-    def cond(s):
-        return s[7] == _OPEN
+    mesh: SurfaceMesh
+    cones: tuple
+    eta: jax.Array
+    max_steps: int = eqx.field(static=True)
+    max_arcs: int = eqx.field(static=True)
 
-    def body(s):
+    def stages(self) -> tuple[Stage, ...]:
+        def init(lane):
+            P, L, (face, ab, direction, entry_edge, entry_t, stop_face, stop_edge, stop_t) = lane
+            dtype = ab.dtype
+            m = self.max_arcs
+            empty = ArcPiece(jnp.zeros((m, 2), dtype), jnp.zeros((m, 2), dtype), jnp.zeros((m, 2), dtype),
+                             jnp.zeros(m, dtype), jnp.zeros(m, dtype), jnp.zeros((m, 2), dtype), jnp.zeros(m, bool),
+                             jnp.zeros(m, bool))
+            state = (face, ab, direction, entry_edge, entry_t, jnp.int32(0), jnp.int32(0), jnp.int32(_OPEN),
+                     jnp.full(m, -1, jnp.int32), empty)
+            return (P, L, (stop_face, stop_edge, stop_t), state)
+
+        return (Stage(init),)
+
+    def route(self, rec) -> jax.Array:
+        return jnp.where(rec[3][7] == _OPEN, 0, -1).astype(jnp.int32)
+
+    def step(self, rec, phase: int | None):
+        del phase  # one phase
+        P, L, (stop_face, stop_edge, stop_t), s = rec
+        mesh, max_arcs = self.mesh, self.max_arcs
         face, ab, direction, entry_edge, entry_t, steps, n_arcs, end, faces_buf, buf = s
+        dtype = ab.dtype
+        centre, radius, axis, angle = self.cones
+        tol_t = 1e3 * jnp.sqrt(jnp.finfo(dtype).eps)
         V, N = mesh.triangle(face)
         coef = conic_coefficients(V, N, P, L)
         entry_t, ab, snapped = _snap_to_root(coef, entry_edge, entry_t, ab)
@@ -160,8 +182,8 @@ def _trace_one(mesh, cones, P, L, eta, seed, max_steps, max_arcs):
         tau, perp, exit_edge, exit_t, exit_ab, phi = arc.tau, arc.perp, arc.edge, arc.t, arc.ab, arc.phi
         ok = arc.exists & snapped
         pcs = pieces_of_arc(ab, tau, perp, jnp.where(ok, phi, 0), exit_ab, is_straight(coef), ok)
-        maybe = may_refract(centre[face], radius[face], axis[face], angle[face], P, L, eta)
-        G, delta, _ = jax.vmap(lambda pc: arc_polynomial(V, N, P, L, coef, pc, eta))(pcs)
+        maybe = may_refract(centre[face], radius[face], axis[face], angle[face], P, L, self.eta)
+        G, delta, _ = jax.vmap(lambda pc: arc_polynomial(V, N, P, L, coef, pc, self.eta))(pcs)
         live = ok & maybe & ~classify(G, delta).excluded
         slot = n_arcs + jnp.cumsum(live) - 1
         slot = jnp.where(live & (slot < max_arcs), slot, max_arcs)  # past the end: dropped
@@ -171,18 +193,21 @@ def _trace_one(mesh, cones, P, L, eta, seed, max_steps, max_arcs):
         g, k_next, t_next, ab_next = cross_edge(mesh, face, exit_edge, exit_t)
         closed = (g == stop_face) & (k_next == stop_edge) & (jnp.abs(t_next - stop_t) <= tol_t)
         end = jnp.where(~ok, _LOST, jnp.where(n_arcs > max_arcs, _OVERFLOW, jnp.where(
-            g < 0, _BOUNDARY, jnp.where(closed, _CLOSED, jnp.where(steps + 1 >= max_steps, _STEPS, _OPEN)))))
-        return (jnp.maximum(g, 0), ab_next, inward(k_next, dtype), k_next, t_next, steps + 1,
-                jnp.minimum(n_arcs, max_arcs + 1), end.astype(jnp.int32), faces_buf, buf)
+            g < 0, _BOUNDARY, jnp.where(closed, _CLOSED, jnp.where(steps + 1 >= self.max_steps, _STEPS, _OPEN)))))
+        s = (jnp.maximum(g, 0), ab_next, inward(k_next, dtype), k_next, t_next, steps + 1,
+             jnp.minimum(n_arcs, max_arcs + 1), end.astype(jnp.int32), faces_buf, buf)
+        return (P, L, (stop_face, stop_edge, stop_t), s)
 
-    s = jax.lax.while_loop(cond, body, state)
-    return s[8], s[9], jnp.minimum(s[6], max_arcs), s[7], s[5]
+    def finish(self, rec):
+        s = rec[3]
+        return s[8], s[9], jnp.minimum(s[6], self.max_arcs), s[7], s[5]
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps", "max_arcs"))
 def _trace(mesh, cones, P, L, eta, seeds, max_steps, max_arcs):
-    return map_lanes(lambda p, l, *sd: _trace_one(mesh, cones, p, l, eta, sd, max_steps, max_arcs),
-                     P, L, *seeds)
+    """Every seed traced in its own loop (`TraceSolver`, chunks of 256 seeds)."""
+    solver = TraceSolver(mesh, cones, eta, max_steps, max_arcs)
+    return run_lanes(solver, (P, L, tuple(seeds)), scheduler="chunked")
 
 
 @jax.jit
