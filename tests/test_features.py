@@ -13,7 +13,7 @@ import pytest
 import caustics_jax as cj
 from caustics_jax import scenes
 from caustics_jax.runtime.blocks import lanes_per_block
-from caustics_jax.solvers import Status, _solve, solve
+from caustics_jax.solvers import Status, Walk, solve
 from caustics_jax.surface.features import SceneFeatures, features
 from caustics_jax.testing import flat_interface_irradiance, partly_covered_floor
 from caustics_jax.transport import irradiance
@@ -158,13 +158,13 @@ def test_lanes_that_need_no_solve_never_enter_the_solver(monkeypatch):
     one fixed-size block (`blocks.lanes_per_block`), the others marked not found, which the
     pool scheduler never steps (`WalkSolver.stages` map only the found lanes)."""
     seen = []
-    solve_walk = _solve.solve_walk
+    solve_block = Walk.solve_block
 
-    def spy(mesh, P, L, eta, start, options):
+    def spy(self, mesh, P, L, eta, start, lane_id):
         seen.append((P.shape[0], int(np.sum(np.asarray(start[2])))))
-        return solve_walk(mesh, P, L, eta, start, options)
+        return solve_block(self, mesh, P, L, eta, start, lane_id)
 
-    monkeypatch.setattr(_solve, "solve_walk", spy)
+    monkeypatch.setattr(Walk, "solve_block", spy)
     mesh, P, L = partly_covered_floor(jnp.float64, n=32, half=6.0)
     crossing = int(np.sum(np.asarray(cj.start_points(mesh, P, L).found)))
     assert 0 < crossing <= 256 < P.shape[0]
