@@ -415,3 +415,15 @@ def test_assert_same_lanes_tolerates_rounding_only():
                 SimpleNamespace(status=a.status, point=point + [[np.inf, 0.0, 0.0], [0.0, 0.0, 0.0]])):
         with pytest.raises(AssertionError):
             assert_same_lanes(a, far, ("status", "point"))
+
+
+def test_a_lane_solver_without_its_steps_cannot_be_built():
+    """`LaneSolver`'s `stages`, `route`, `step` and `finish` are abstract."""
+    class NoSteps(LaneSolver):
+        phases: ClassVar[tuple[str, ...]] = ("only",)
+
+        def stages(self):
+            return ()
+
+    with pytest.raises(TypeError):
+        NoSteps()

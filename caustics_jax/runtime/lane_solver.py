@@ -32,6 +32,7 @@ program's vector code (`tests/test_scheduling.py`).
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
@@ -64,25 +65,29 @@ class Stage(NamedTuple):
 
 class LaneSolver(eqx.Module):
     """The protocol (module docstring). Subclasses set `phases` and implement `stages`,
-    `route`, `step` and `finish`; `passes`, `restart`, `moving` and `settle` default to one
-    pass of the whole record."""
+    `route`, `step` and `finish` (abstract: a solver without one cannot be built);
+    `passes`, `restart`, `moving` and `settle` default to one pass of the whole record."""
 
     phases: ClassVar[tuple[str, ...]] = ()
     passes: ClassVar[int] = 1
     #: Each phase's pool width as a share of the pool scheduler's slots (None: 1 each).
     pool_shares: ClassVar[tuple[float, ...] | None] = None
 
+    @abc.abstractmethod
     def stages(self) -> tuple[Stage, ...]:
-        raise NotImplementedError
+        """The lane's set-up, in order (module docstring)."""
 
+    @abc.abstractmethod
     def route(self, state) -> jax.Array:
-        raise NotImplementedError
+        """The phase `state` needs next (int32), or -1 once it is done."""
 
+    @abc.abstractmethod
     def step(self, state, phase: int | None):
-        raise NotImplementedError
+        """One step of `phase` (None: of the lane's own phase, every phase computed)."""
 
+    @abc.abstractmethod
     def finish(self, record) -> Any:
-        raise NotImplementedError
+        """The block's result from the final records (lane axis first)."""
 
     def restart(self, record):
         return record

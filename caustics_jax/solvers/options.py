@@ -90,8 +90,9 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
 
     def solve_block(self, mesh, P, L, eta, start, lane_id):
         """The solver on one block of lanes (`solve` runs every batch in blocks of one size):
-        a `Solution`. Only the block solvers (walk, Newton) have one."""
-        raise NotImplementedError(f"{type(self).__name__} does not solve in blocks")
+        a `Solution`. Only the block solvers (walk, Newton) have one; `Exhaustive` and
+        `Trace` return every path and `solve` runs them whole."""
+        raise TypeError(f"{type(self).__name__} returns every path: it is not solved in blocks")
 
     def fallbacks(self, dtype) -> tuple[SolverOptions, ...]:
         """The solvers that retry, in turn, the lanes this one ends without a path (none)."""
