@@ -52,8 +52,8 @@ class Stage(NamedTuple):
     """One step of a lane's set-up: `fn(record) -> record` on every lane, or with `when`
     (`when(record) -> bool`) only where it holds. There `keep=True`: `fn` returns the
     record's own structure and the other lanes keep theirs; `keep=False`: the other lanes
-    get zeros of `fn`'s result. `chunked`: an every-lane stage runs in chunks of the
-    pool's width under the pool scheduler too, so it rounds as the chunked scheduler does
+    get zeros of `fn`'s result. `chunked`: an every-lane stage runs in `lanes.map_lanes`'
+    chunks under the pool scheduler too, so it rounds as the chunked scheduler does
     (XLA's vector code at another width rounds `f` differently: Newton's residuals 3.9e-7
     apart in float32, 9e-16 in float64); otherwise it is one vmap over the block."""
 
@@ -90,12 +90,15 @@ class LaneSolver(eqx.Module):
         """The block's result from the final records (lane axis first)."""
 
     def restart(self, record):
+        """Before each pass: the lanes sent back to work (default: none)."""
         return record
 
     def moving(self, record):
+        """What the steps read and write (default: the whole record)."""
         return record
 
     def settle(self, record, moving):
+        """`moving` put back into `record` after a pass."""
         del record
         return moving
 
