@@ -365,7 +365,8 @@ def no_jit_work(monkeypatch):
         raise AssertionError("jitted work started before the argument was refused")
 
     monkeypatch.setattr(_solve, "_solve_blocks", boom)
-    monkeypatch.setattr(_solve, "solve_exhaustive", boom)
+    for whole in (cj.Exhaustive, cj.Trace):  # the solvers run on the whole batch
+        monkeypatch.setattr(whole, "solve_whole", boom)
 
 
 BAD_OPTIONS = [

@@ -26,13 +26,13 @@ from ..surface.features import check as check_features
 from ..surface.lights import Directional, light_points, scene_size
 from ..surface.mesh import SurfaceMesh
 from ._solution import Solution, Status
-from .exhaustive import Exhaustive, ExhaustiveSolution, solve_exhaustive
+from .exhaustive import Exhaustive, ExhaustiveSolution
 from .flat import flat_root, flat_solution
 from .newton import Newton
 from .options import SolverOptions
 from .sides import warn_if_no_crossing, warn_if_wrong_sides
 from .solution_set import translated
-from .trace import Trace, solve_trace, with_solutions
+from .trace import Trace, with_solutions
 from .walk import Walk
 
 #: `method=` names and their solver classes.
@@ -83,8 +83,7 @@ def returns_every_path(method, options: dict) -> bool:
     """Whether `solve(..., method=method, **options)` returns every path per receiver (an
     `ExhaustiveSolution`: `Trace`, `Exhaustive(return_all=True)`, `solutions="all"`); a
     `ValueError` for a bad method or option, as `solve` would raise."""
-    solver = solver_from(*with_solutions(method, options))
-    return isinstance(solver, Trace) or (isinstance(solver, Exhaustive) and solver.return_all)
+    return solver_from(*with_solutions(method, options)).every_path()
 
 
 def check_start(start, n: int, dtype, n_faces: int | None = None) -> StartPoint | None:
@@ -225,26 +224,16 @@ def solve_local(mesh: SurfaceMesh | PreparedSurface, P, L, *, eta: float = 1.333
 
     n, dtype = P.shape[0], prep.dtype
     eta = check_fits("eta", check_eta(eta), dtype, positive=True)
-    if isinstance(solver, Exhaustive) and dtype != jnp.float64:  # before its float64 tol is judged
-        raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
+    solver.check_dtype(dtype)  # before the tolerance is judged (the exhaustive reference's is float64's)
     check_tol_resolves("tol", getattr(solver, "tol", None), dtype)
     check_features(features)
     start = check_start(start, n, dtype, prep.mesh.faces.shape[0])
-    if isinstance(solver, Exhaustive):
+    if not solver.in_blocks:  # the exhaustive reference, every path on the traced curve
         if n == 0:
-            if dtype != jnp.float64:
-                raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
             sol = empty_solution(0, dtype, Status.NO_SOLUTION)
-            return done(ExhaustiveSolution.empty(sol) if solver.return_all else sol, np.zeros(0, bool))
+            return done(ExhaustiveSolution.empty(sol) if solver.every_path() else sol, np.zeros(0, bool))
         start = start if start is not None else prep.start_points(P, L)
-        return done(solve_exhaustive(prep.mesh, P, L, eta, tuple(start), solver, padded=prep.padded), start[2])
-    if isinstance(solver, Trace):  # every solution on the traced curve (solvers/trace.py)
-        if n == 0:
-            return done(ExhaustiveSolution.empty(empty_solution(0, dtype, Status.NO_SOLUTION)), np.zeros(0, bool))
-        start = start if start is not None else prep.start_points(P, L)
-        return done(solve_trace(prep.mesh, P, L, eta, tuple(start), solver, prep.padded), start[2])
-    if isinstance(solver, Newton):
-        solver.check_dtype(dtype)
+        return done(solver.solve_whole(prep, P, L, eta, tuple(start)), start[2])
     if n == 0:
         return done(empty_solution(0, dtype), np.zeros(0, bool))
     feats = prep.features if isinstance(features, str) else features

@@ -85,6 +85,18 @@ class Exhaustive(SolverOptions):
     cull: bool = option(True, lambda v: check_bool("cull", v))
     return_all: bool = option(False, lambda v: check_bool("return_all", v))
 
+    in_blocks: ClassVar[bool] = False
+
+    def every_path(self) -> bool:
+        return self.return_all
+
+    def check_dtype(self, dtype) -> None:
+        if jnp.dtype(dtype) != jnp.float64:
+            raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
+
+    def solve_whole(self, prep, P, L, eta, start):
+        return solve_exhaustive(prep.mesh, P, L, eta, start, self, padded=prep.padded)
+
 
 # --------------------------------------------------------------------------- kernels
 

@@ -90,9 +90,27 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
 
     def solve_block(self, mesh, P, L, eta, start, lane_id):
         """The solver on one block of lanes (`solve` runs every batch in blocks of one size):
-        a `Solution`. Only the block solvers (walk, Newton) have one; `Exhaustive` and
-        `Trace` return every path and `solve` runs them whole."""
-        raise TypeError(f"{type(self).__name__} returns every path: it is not solved in blocks")
+        a `Solution`. Only the block solvers (walk, Newton) have one; `solve` runs
+        `Exhaustive` and `Trace` whole (`solve_whole`)."""
+        raise TypeError(f"{type(self).__name__} is not solved in blocks (solve_whole)")
+
+    #: Whether `solve` runs this solver in blocks of lanes (`solve_block`: the walk and
+    #: Newton) or on the whole batch at once (`solve_whole`: `Exhaustive`, `Trace`).
+    in_blocks: ClassVar[bool] = True
+
+    def every_path(self) -> bool:
+        """Whether `solve` returns every path per receiver (an `ExhaustiveSolution`)."""
+        return False
+
+    def check_dtype(self, dtype) -> None:
+        """A `ValueError` where this solver cannot run in `dtype` (default: every dtype)."""
+        del dtype
+
+    def solve_whole(self, prep, P, L, eta, start):
+        """The result of a solver that runs on the whole batch at once (`in_blocks` False),
+        given the prepared surface `prep` (local frame), validated lanes and their start
+        points `(face, barycentric, found)`."""
+        raise TypeError(f"{type(self).__name__} is solved in blocks (solve_block)")
 
     def fallbacks(self, dtype) -> tuple[SolverOptions, ...]:
         """The solvers that retry, in turn, the lanes this one ends without a path (none)."""

@@ -112,6 +112,14 @@ class Trace(SolverOptions):
     dedupe: float | None = option(None, lambda v: None if v is None else check_real("dedupe", v, 0.0))
     chunk: int = option(4096, lambda v: check_int("chunk", v, 1, 2**20))
 
+    in_blocks: ClassVar[bool] = False
+
+    def every_path(self) -> bool:
+        return True
+
+    def solve_whole(self, prep, P, L, eta, start):
+        return solve_trace(prep.mesh, P, L, eta, start, self, prep.padded)
+
     def dedupe_radius(self, dtype, extent: float = 2.0) -> float:
         """`dedupe`, or its default for a mesh whose largest coordinate is `extent` (m)."""
         if self.dedupe is not None:
