@@ -169,8 +169,7 @@ def solve_exhaustive(mesh, P, L, eta, start, options: Exhaustive, padded=None):
     without a start point: the scan does not need one), else `NO_SOLUTION`, or
     `NO_CROSSING` where there is neither a solution nor a start point.
     """
-    if mesh.dtype != jnp.float64:
-        raise ValueError("method='exhaustive' is the float64 reference: pass a float64 mesh")
+    options.check_dtype(mesh.dtype)
     start = start if start is not None else start_points(mesh, P, L)
     mesh_b = padded if padded is not None else padded_mesh(mesh)
     lanes, faces = candidate_pairs(mesh, mesh_b, P, L, eta, options.cull, options.chunk)

@@ -85,6 +85,10 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
         return self.with_options(**{f.name: f.default for f in dataclasses.fields(self)
                                     if f.name in self.traced + self.host})
 
+    #: Whether `solve` runs this solver in blocks of lanes (`solve_block`: the walk and
+    #: Newton) or on the whole batch at once (`solve_whole`: `Exhaustive`, `Trace`).
+    in_blocks: ClassVar[bool] = True
+
     #: Whether `solve` may settle a lane on a flat surface in closed form (docs/features.md).
     flat_closed_form: ClassVar[bool] = False
 
@@ -93,10 +97,6 @@ class SolverOptions(eqx.Module, metaclass=_KnownOptions):
         a `Solution`. Only the block solvers (walk, Newton) have one; `solve` runs
         `Exhaustive` and `Trace` whole (`solve_whole`)."""
         raise TypeError(f"{type(self).__name__} is not solved in blocks (solve_whole)")
-
-    #: Whether `solve` runs this solver in blocks of lanes (`solve_block`: the walk and
-    #: Newton) or on the whole batch at once (`solve_whole`: `Exhaustive`, `Trace`).
-    in_blocks: ClassVar[bool] = True
 
     def every_path(self) -> bool:
         """Whether `solve` returns every path per receiver (an `ExhaustiveSolution`)."""
