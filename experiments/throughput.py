@@ -24,6 +24,13 @@
 #   until its slowest lane, the pool's idle slots while it drains: the pool's loop trips
 #   are replayed on the host from the lanes' step counts, exactly as `pools.run_pools`
 #   refills its slots);
+#   Each count twice: XLA's **compiled** programs (after its fusion copies shared values
+#   into every consuming kernel) and the **traced** ones (the lowered program, before
+#   XLA's passes);
+# - the **formula** count: the arithmetic the mathematics needs, each formula's own
+#   function counted alone on one lane and summed over the steps the lanes took
+#   (`formula_flops`: a crossing, a refinement step, the first triangle, a Newton step and
+#   each face of its re-projection; docs/solvers.md "Formula count");
 # - the machine's practical peak: a jitted element-wise fused multiply-add loop in the
 #   same process, per dtype.
 #
@@ -52,12 +59,25 @@ import numpy as np  # noqa: E402
 
 from caustics_jax import Newton, Walk, prepare, solve  # noqa: E402
 from caustics_jax.app import compare  # noqa: E402
+from caustics_jax.curve.arcs import (  # noqa: E402
+    boundary_crossings,
+    orientation,
+    pencil_angle,
+    pencil_point,
+    project_to_conic,
+    sign_test_exit,
+)
+from caustics_jax.math.barycentric import ray_plane_barycentric  # noqa: E402
+from caustics_jax.math.conic import conic_coefficients, conic_tangent  # noqa: E402
+from caustics_jax.math.geometry import newton_step_2x2  # noqa: E402
+from caustics_jax.math.objectives import bracket_objective, half_vector_residual_and_jacobian  # noqa: E402
 from caustics_jax.runtime.blocks import lanes_per_block  # noqa: E402
 from caustics_jax.runtime.lane_solver import pool_widths, stage_lane  # noqa: E402
 from caustics_jax.runtime.pools import pool_slots  # noqa: E402
 from caustics_jax.solvers.newton import NewtonSolver, newton_init, newton_iteration  # noqa: E402
 from caustics_jax.solvers.walk import WalkLane, WalkSolver  # noqa: E402
 from caustics_jax.solvers.walk_steps import BISECT, WALK  # noqa: E402
+from caustics_jax.surface.mesh import cross_edge  # noqa: E402
 from experiments.common import figures_dir, log, run_and_write, use_agg  # noqa: E402
 
 CONFIGS = {
@@ -112,16 +132,98 @@ def peak_flops(dtype, size: int = 1 << 16, iters: int = 2000, repeats: int = 5) 
 # ## FLOPs of the lane programs (XLA cost analysis)
 
 # %%
-def _flops(fn, *args) -> float:
-    """FLOPs per lane of `vmap(fn)` on a batch of `WIDTH` lanes."""
-    cost = jax.jit(jax.vmap(fn)).lower(*args).compile().cost_analysis()
+def _flops(fn, *args, traced: bool = False) -> float:
+    """FLOPs per lane of `vmap(fn)` on a batch of `WIDTH` lanes: of XLA's compiled program
+    (with its fusion copies), or `traced` (the lowered program, before XLA's passes)."""
+    lowered = jax.jit(jax.vmap(fn)).lower(*args)
+    cost = lowered.cost_analysis() if traced else lowered.compile().cost_analysis()
     cost = cost[0] if isinstance(cost, list) else cost
     return float(cost["flops"]) / WIDTH
 
 
-def lane_flops(solver, mesh, P, L, start, eta: float = 1.333) -> dict:
+def _traced_flops(fn, *args) -> float:
+    """XLA's count of `fn` as traced (the lowered program, before XLA's optimisation: no
+    fusion copies), for one lane (unbatched arguments)."""
+    cost = jax.jit(fn).lower(*args).cost_analysis()
+    cost = cost[0] if isinstance(cost, list) else cost
+    return float(cost["flops"])
+
+
+def formula_flops(mesh, P, L, face, ab0, eta: float = 1.333) -> dict:
+    """The arithmetic the mathematics needs, per lane: each formula's own function counted
+    alone on one lane (`_traced_flops`), and summed as seed 001 §3.4 and the one-step
+    Newton need them (docs/solvers.md "Formula count"). Compares and selects inside a
+    formula count as XLA counts them; nothing of the solvers' bookkeeping is in it.
+
+    A crossing: the edge crossing, the face's conic (eq. 10-12), the exit by the vertex
+    signs and one edge quadratic (eq. 22-24), the travel direction from the tangent (eq.
+    13-15), the exit's pencil angle, `f` at the exit (eq. 19-21; the entry's `f` is the
+    previous exit's). A refinement step: one cut of the arc (the chord cut, a line cut of
+    the conic) and `f` there (the face's conic carried). The first triangle: the conic,
+    both boundary crossings, one orientation (the other direction is its negation), two
+    pencil angles, `f` at `M0` and at both exits. A Newton step: the half-vector residual
+    and its closed-form Jacobian, the 2x2 solve, `f` at the new point; each face its
+    re-projection visits: an edge crossing and a ray-plane intersection."""
+    dtype = mesh.dtype
+    eta = jnp.asarray(eta, dtype)
+    P, L, face, ab0 = P[0], L[0], face[0], ab0[0]
+    V, N = mesh.triangle(face)
+    coef = conic_coefficients(V, N, P, L)
+    tau, perp = orientation(coef, ab0, conic_tangent(coef, ab0))
+    k, t = jnp.int32(0), jnp.asarray(0.5, dtype)
+    pieces = {
+        "cross_edge": _traced_flops(lambda f, k, t: cross_edge(mesh, f, k, t), face, k, t),
+        "conic_coefficients": _traced_flops(conic_coefficients, V, N, P, L),
+        "sign_test_exit": _traced_flops(sign_test_exit, coef, k, t),
+        "boundary_crossings": _traced_flops(boundary_crossings, coef),
+        "orientation": _traced_flops(lambda c, e: orientation(c, e, conic_tangent(c, e)), coef, ab0),
+        "pencil_angle": _traced_flops(lambda v, a, b: pencil_angle(v, a, b, jnp.linalg.norm(v), jnp.sum(jnp.abs(v))),
+                                      ab0 - 0.1, tau, perp),
+        "f": _traced_flops(lambda x: bracket_objective(V, N, P, L, x[None], eta), ab0),
+        "chord_cut": _traced_flops(project_to_conic, coef, ab0),
+        "pencil_cut": _traced_flops(lambda c, a, t_, p_: pencil_point(c, a, t_, p_, jnp.asarray(0.5, dtype)),
+                                    coef, ab0, tau, perp),
+        "half_vector_jacobian": _traced_flops(lambda x: half_vector_residual_and_jacobian(V, N, P, L, x, eta), ab0),
+        "solve_2x2": _traced_flops(newton_step_2x2, jnp.eye(2, dtype=dtype), jnp.ones(2, dtype)),
+        "ray_plane": _traced_flops(ray_plane_barycentric, V, P, L),
+    }
+    q = pieces
+    return {"pieces": pieces,
+            "crossing": q["cross_edge"] + q["conic_coefficients"] + q["sign_test_exit"] + q["orientation"]
+            + q["pencil_angle"] + q["f"],
+            "refinement": q["chord_cut"] + q["f"],
+            "first_triangle": q["conic_coefficients"] + q["boundary_crossings"] + q["orientation"]
+            + 2 * q["pencil_angle"] + 3 * q["f"],
+            "newton_start": q["f"],
+            "newton_step": q["half_vector_jacobian"] + q["solve_2x2"] + q["f"],
+            "newton_face": q["cross_edge"] + q["ray_plane"],
+            "ellipse_sample": q["pencil_cut"] + q["f"]}
+
+
+def formula_per_solve(solver, counts: dict, sol, ellipse: np.ndarray, n_ellipse: int) -> float:
+    """`formula_flops` summed over the steps each lane took (`sol`), per solve: the walk's
+    first triangle on every lane with a start point (and the ellipse samples where the curve
+    has no edge crossing), its crossings (`crossed`, plus an exit through the boundary) and
+    refinement steps; Newton's start, its steps, and one face per step plus one per
+    triangle crossed in the re-projections."""
+    status = np.asarray(sol.status)
+    started = status != 1  # NO_CROSSING = 1
+    steps = np.asarray(sol.iterations).astype(np.int64)
+    crossed = np.asarray(sol.crossed).astype(np.int64)
+    if isinstance(solver, Walk):
+        w = np.minimum(crossed + (status == 3), steps)  # LEFT_MESH = 3
+        total = (started.sum() * counts["first_triangle"] + ellipse.sum() * (n_ellipse - 1) * counts["ellipse_sample"]
+                 + w.sum() * counts["crossing"] + (steps - w).sum() * counts["refinement"])
+    else:
+        total = (started.sum() * counts["newton_start"] + steps.sum() * counts["newton_step"]
+                 + (steps.sum() + crossed.sum()) * counts["newton_face"])
+    return float(total) / len(status)
+
+
+def lane_flops(solver, mesh, P, L, start, eta: float = 1.333, traced: bool = False) -> dict:
     """Per-lane FLOPs of the programs `solver` runs: `init` (first triangle without the
-    ellipse samples, or Newton's start), `init_full` (with them), `step` (one iteration)."""
+    ellipse samples, or Newton's start), `init_full` (with them), `step` (one iteration);
+    XLA's compiled programs, or `traced` (`_flops`)."""
     dtype = mesh.dtype
     eta, tol = jnp.asarray(eta, dtype), jnp.asarray(solver.tolerance(dtype), dtype)
     face, ab0, found = start
@@ -135,20 +237,21 @@ def lane_flops(solver, mesh, P, L, start, eta: float = 1.333) -> dict:
         first = jax.jit(jax.vmap(lean.fn))(lane)
         records = jax.jit(jax.vmap(walks.fn))(first)
         moving = jax.vmap(walk.moving)(records)
-        init = _flops(lean.fn, lane) + _flops(walks.fn, first)
+        init = _flops(lean.fn, lane, traced=traced) + _flops(walks.fn, first, traced=traced)
         # with the ellipse samples: what a lane whose curve has no edge crossing adds
-        return {"init": init, "init_full": init + _flops(ellipse.fn, records),
-                "step": _flops(lambda m: walk.step(m, None), moving),
-                "step_walk": _flops(lambda m: walk.step(m, WALK), moving),
-                "step_bisect": _flops(lambda m: walk.step(m, BISECT), moving)}
+        return {"init": init, "init_full": init + _flops(ellipse.fn, records, traced=traced),
+                "step": _flops(lambda m: walk.step(m, None), moving, traced=traced),
+                "step_walk": _flops(lambda m: walk.step(m, WALK), moving, traced=traced),
+                "step_bisect": _flops(lambda m: walk.step(m, BISECT), moving, traced=traced)}
     if solver.stepping == "converge":
         return None  # optimistix's inner loop: XLA counts a loop body once (module docstring)
     beta0 = jnp.asarray(solver.initial_step, dtype)
     init = lambda p, l, f, a, ok: newton_init(mesh, p, l, f, a, ok, eta, tol, beta0)  # noqa: E731
     states = jax.jit(jax.vmap(init))(P, L, face, ab0, found)
-    flops_init = _flops(init, P, L, face, ab0, found)
+    flops_init = _flops(init, P, L, face, ab0, found, traced=traced)
     return {"init": flops_init, "init_full": flops_init,
-            "step": _flops(lambda p, l, s: newton_iteration(mesh, p, l, eta, tol, solver, s), P, L, states)}
+            "step": _flops(lambda p, l, s: newton_iteration(mesh, p, l, eta, tol, solver, s), P, L, states,
+                          traced=traced)}
 
 
 def pool_trips(phases: np.ndarray, widths: tuple[int, ...]) -> np.ndarray:
@@ -297,14 +400,19 @@ def run(args) -> dict:
                     jax.block_until_ready(solve(prep, Pd, Ld, method=solver))
                     times[name].append(time.perf_counter() - t)
                     cpu[name].append(time.process_time() - c)
+            counts = formula_flops(prep.padded, jnp.asarray(Pd), jnp.asarray(Ld), *start[:2])
             for name, solver in configs.items():
                 sol = sols[name]
                 wall = float(np.median(times[name]))
                 fl = lane_flops(solver, prep.padded, jnp.asarray(Pd), jnp.asarray(Ld), start)
+                fl_traced = lane_flops(solver, prep.padded, jnp.asarray(Pd), jnp.asarray(Ld), start, traced=True)
                 if isinstance(solver, Walk) and ellipse is None:
                     ellipse = ellipse_lanes(solver, prep.padded, jnp.asarray(Pd), jnp.asarray(Ld), start_all)
-                work = executed_and_useful(solver, fl, sol, ellipse if isinstance(solver, Walk) else
-                                           np.zeros(n, bool), lanes_per_block())
+                lane_ellipse = ellipse if isinstance(solver, Walk) else np.zeros(n, bool)
+                work = executed_and_useful(solver, fl, sol, lane_ellipse, lanes_per_block())
+                traced = executed_and_useful(solver, fl_traced, sol, lane_ellipse, lanes_per_block())["useful"]
+                formula = (formula_per_solve(solver, counts, sol, lane_ellipse, getattr(solver, "ellipse_samples", 0))
+                           if fl is not None else np.nan)
                 it = np.asarray(sol.iterations)[np.asarray(sol.found)]
                 row = {"scene": scene, "dtype": dtype, "config": name, "n": n,
                        "solves_per_s": n / wall, "seconds": wall, "cpu_seconds": float(np.median(cpu[name])),
@@ -314,14 +422,18 @@ def run(args) -> dict:
                        **success(sol, ref), "status": sol.summary(),
                        "iterations_median": float(np.median(it)) if it.size else None,
                        "iterations_p99": float(np.quantile(it, 0.99)) if it.size else None,
-                       "flops_per_lane_program": fl,
+                       "flops_per_lane_program": fl, "traced_flops_per_lane_program": fl_traced,
+                       "formula_counts": counts, "formula_flops_per_solve": formula,
+                       "traced_flops_per_solve": traced / n,
                        "useful_flops_per_solve": work["useful"] / n, "executed_flops_per_solve": work["executed"] / n,
                        "useful_gflops": work["useful"] / wall / 1e9, "executed_gflops": work["executed"] / wall / 1e9,
                        "peak_gflops": peaks[dtype] / 1e9}
                 rows.append(row)
                 log(f"[{scene} {dtype}] {name:<22} {row['solves_per_s']:>9.0f} solves/s  success "
                     f"{row['success']:.4f}  useful {row['useful_flops_per_solve'] / 1e3:6.1f}k  executed "
-                    f"{row['executed_flops_per_solve'] / 1e3:6.1f}k FLOP/solve  compile {row['compile_s']:.1f} s")
+                    f"{row['executed_flops_per_solve'] / 1e3:6.1f}k FLOP/solve (traced "
+                    f"{row['traced_flops_per_solve'] / 1e3:.1f}k, formula {formula / 1e3:.1f}k)  compile "
+                    f"{row['compile_s']:.1f} s")
     return {"rows": rows, "peaks_gflops": {k: v / 1e9 for k, v in peaks.items()}, "n": n, "ref_n": ref_n,
             "repeats": repeats, "platform": jax.default_backend(), "devices": [str(d) for d in jax.local_devices()],
             "pool_slots": pool_slots(), "block_lanes": lanes_per_block(),
@@ -398,11 +510,12 @@ def plot(report, path):
 
 # %%
 def table(report) -> str:
-    head = (f"{'scene':<14}{'dtype':<9}{'config':<23}{'solves/s':>10}{'success':>9}{'useful':>9}{'executed':>10}"
-            f"{'exec/useful':>12}{'% peak':>8}{'compile':>9}")
+    head = (f"{'scene':<14}{'dtype':<9}{'config':<23}{'solves/s':>10}{'success':>9}{'formula':>9}{'traced':>9}"
+            f"{'useful':>9}{'executed':>10}{'exec/useful':>12}{'% peak':>8}{'compile':>9}")
     lines = [head, "-" * len(head)]
     for r in report["rows"]:
         lines.append(f"{r['scene']:<14}{r['dtype']:<9}{r['config']:<23}{r['solves_per_s']:>10.0f}{r['success']:>9.4f}"
+                     f"{r['formula_flops_per_solve'] / 1e3:>8.1f}k{r['traced_flops_per_solve'] / 1e3:>8.1f}k"
                      f"{r['useful_flops_per_solve'] / 1e3:>8.1f}k {r['executed_flops_per_solve'] / 1e3:>8.1f}k"
                      f"{r['executed_flops_per_solve'] / r['useful_flops_per_solve']:>12.2f}"
                      f"{100 * r['executed_gflops'] / r['peak_gflops']:>7.1f}%{r['compile_s']:>8.1f}s")

@@ -74,6 +74,19 @@ def barycentric_coordinates(E1: Float[Array, "*batch 3"], E2: Float[Array, "*bat
     return jnp.stack([(g22 * r1 - g12 * r2) * inv, (g11 * r2 - g12 * r1) * inv], -1)
 
 
+def ray_plane_barycentric(V: Float[Array, "3 3"], P: Float[Array, " 3"], T: Float[Array, " 3"]):
+    """Barycentrics of the point where the ray from `P` through `T` meets the plane of
+    triangle `V` (seed 001 eq. 3 solved for `a, b`), and whether it meets it ahead of `P`:
+    one face of the one-step Newton's re-projection (`solvers.newton`)."""
+    E1, E2 = V[1] - V[0], V[2] - V[0]
+    n = jnp.cross(E1, E2)
+    d = T - P
+    denom = dot(n, d)
+    ok = denom != 0
+    s = jnp.where(ok, dot(n, V[0] - P) / jnp.where(ok, denom, 1), 0)
+    return barycentric_coordinates(E1, E2, P + s * d - V[0]), ok & (s > 0)
+
+
 @float_inputs("N", "ab")
 def interpolated_normal(N: Float[Array, "*batch 3 3"], ab: Float[Array, "*batch 2"]):
     """Unnormalised interpolated normal `n~ = n0 + a (n1 - n0) + b (n2 - n0)` (seed 001 eq. 6-8)."""

@@ -114,6 +114,17 @@ def refract(
     return jnp.where(transmits, out, jnp.zeros_like(out))
 
 
+def newton_step_2x2(J: Float[Array, "2 2"], r: Float[Array, " 2"]):
+    """The Newton step `dx = J^-1 r` of a 2x2 system by Cramer's rule, and whether `J` is
+    solvable (finite, nonzero determinant, finite `r`); `dx = 0` where not (the one-step
+    Newton's system, Hanika et al. 2015 §4.3)."""
+    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    solvable = jnp.isfinite(det) & (det != 0) & jnp.all(jnp.isfinite(r))
+    inv = 1 / jnp.where(solvable, det, 1)
+    dx = jnp.stack([J[1, 1] * r[0] - J[0, 1] * r[1], J[0, 0] * r[1] - J[1, 0] * r[0]]) * inv
+    return jnp.where(solvable, dx, 0), solvable
+
+
 def safe_div(x, y, ok):
     """`x / y` where `ok`, 0 elsewhere, with finite values and gradients (double where)."""
     return jnp.where(ok, x / jnp.where(ok, y, 1), 0)

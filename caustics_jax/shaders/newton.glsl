@@ -76,7 +76,7 @@ int cj_exit_edge(vec2 ab, vec2 ab_new, out float t) {
     return k;
 }
 
-// newton._ray_plane_barycentric: barycentrics where the ray from P through T meets the plane
+// math.barycentric.ray_plane_barycentric: barycentrics where the ray from P through T meets the plane
 // of triangle V (seed 001 eq. 3 solved for a, b), and whether it meets it ahead of P.
 bool cj_ray_plane_barycentric(vec3 V[3], vec3 P, vec3 T, out vec2 ab) {
     vec3 E1 = V[1] - V[0], E2 = V[2] - V[0];

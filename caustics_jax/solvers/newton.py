@@ -49,8 +49,8 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ..curve.arcs import inside as inside_triangle
-from ..math.barycentric import barycentric_coordinates, barycentric_point, edge_barycentric
-from ..math.geometry import dot
+from ..math.barycentric import barycentric_point, edge_barycentric, ray_plane_barycentric
+from ..math.geometry import dot, newton_step_2x2
 from ..math.objectives import (
     ObjectiveStatus,
     angle_difference_residual,
@@ -224,18 +224,6 @@ def _patch(mesh, P, L, eta, tol, options: Newton, s: _State) -> _State:
                       crossed=s.crossed + jnp.where(inside | left, 0, 1))
 
 
-def _ray_plane_barycentric(V, P, T):
-    """Barycentrics of the point where the ray from `P` through `T` meets the plane of
-    triangle `V` (seed 001 eq. 3 solved for `a, b`), and whether it meets it ahead of `P`."""
-    E1, E2 = V[1] - V[0], V[2] - V[0]
-    n = jnp.cross(E1, E2)
-    d = T - P
-    denom = dot(n, d)
-    ok = denom != 0
-    s = jnp.where(ok, dot(n, V[0] - P) / jnp.where(ok, denom, 1), 0)
-    return barycentric_coordinates(E1, E2, P + s * d - V[0]), ok & (s > 0)
-
-
 def _reproject(mesh, P, face, ab, ab_t):
     """Project the tentative point `ab_t` (in `face`'s extended plane) back onto the surface
     along the ray from `P` through it, walking the adjacency from `face` along the step
@@ -254,7 +242,7 @@ def _reproject(mesh, P, face, ab, ab_t):
         k, t, _ = _exit_edge(x, y)
         g, _, _, e = cross_edge(mesh, face, k, t)
         Vg, _ = mesh.triangle(g)
-        y_g, hit = _ray_plane_barycentric(Vg, P, T)
+        y_g, hit = ray_plane_barycentric(Vg, P, T)
         ok_g = (g >= 0) & hit
         return (jnp.where(ok_g, g, face), jnp.where(ok_g, e, x), jnp.where(ok_g, y_g, y), ok_g,
                 left | (g < 0), n + 1)
@@ -275,11 +263,7 @@ def _one_step(mesh, P, L, eta, tol, options: Newton, s: _State) -> _State:
     else:
         C = lambda ab: residual(V, N, P, L, ab, eta)  # noqa: E731
         r, J = C(s.ab), jax.jacfwd(C)(s.ab)
-    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
-    solvable = jnp.isfinite(det) & (det != 0) & jnp.all(jnp.isfinite(r))
-    inv = 1 / jnp.where(solvable, det, 1)
-    dx = jnp.stack([J[1, 1] * r[0] - J[0, 1] * r[1], J[0, 0] * r[1] - J[1, 0] * r[0]]) * inv
-    dx = jnp.where(solvable, dx, 0)
+    dx, solvable = newton_step_2x2(J, r)
     face, ab, hit, left, crossings = _reproject(mesh, P, s.face, s.ab, s.ab - s.beta * dx)
     # The projected path must still refract: P and L on opposite sides of the shading
     # normal (Cycles rejects the tentative vertex otherwise).
