@@ -32,6 +32,7 @@ from ..curve.arcs import (
 )
 from ..math.conic import conic_coefficients, conic_tangent
 from ..math.objectives import ObjectiveStatus, bracket_objective
+from ..runtime.fusion import stored
 from ..surface.mesh import cross_edge
 from ._solution import Status
 
@@ -291,7 +292,9 @@ def _lean_walk_branch(mesh, P, L, eta, tol, s: WalkState) -> WalkState:
     clear, geometry = _lean_walk_geometry(coef, k_in, t_in, e)
     f1, st1, g1 = bracket_objective(V, N, P, L, geometry.ab[None], eta)
     walked = _walk_update(s, g, e, geometry, f1[0], st1[0], g1[0], tol)
-    decided = clear & (g >= 0)
+    # Every field of both outcomes reads the crossing's decisions: stored once, not copied
+    # into each field's kernel (`runtime.fusion`; docs/solvers.md "Stored decisions").
+    walked, decided = stored((walked, clear & (g >= 0)))
     return jax.tree.map(lambda w, o: jnp.where(decided, w, o), walked, s._replace(mode=jnp.int32(EXACT)))
 
 
