@@ -61,3 +61,28 @@ def test_stored_decisions_are_computed_once_on_cpu():
     assert once * 3 < copied, (once, copied)
     np.testing.assert_array_equal(jax.jit(lambda x, ys: program(x, ys, True))(x, ys),
                                   jax.jit(lambda x, ys: program(x, ys, False))(x, ys))
+
+
+def test_the_walk_crossing_step_computes_its_decisions_once():
+    """The walk's crossing step (the pool's widest program) compiles to fewer than 3,500
+    fused instructions at 512 lanes: 2,443 with its outcome stored, 4,967 without, when
+    XLA:CPU copies the decisions into each state field's kernel (this 512-face pool,
+    2026-12-02; docs/solvers.md "Stored decisions"). Shapes only: the step is compiled,
+    never run."""
+    if jax.default_backend() != "cpu":
+        pytest.skip("the fusion behaviour measured is XLA:CPU's")
+    import caustics_jax as cj
+    from caustics_jax.runtime.lane_solver import stage_lane
+    from caustics_jax.solvers.walk import Walk, WalkLane, WalkSolver
+    from caustics_jax.solvers.walk_steps import WALK
+
+    mesh = cj.scenes.wavy_pool(512, n_receivers=4, dtype="float32").surface
+    f32 = jnp.float32
+    solver = WalkSolver(mesh, f32(1.333), f32(1e-5), jnp.int32(512), Walk())
+    n = 512
+    lanes = WalkLane(jax.ShapeDtypeStruct((n, 3), f32), jax.ShapeDtypeStruct((n, 3), f32),
+                     jax.ShapeDtypeStruct((n,), jnp.int32), jax.ShapeDtypeStruct((n, 2), f32),
+                     jax.ShapeDtypeStruct((n,), jnp.bool_))
+    moving = jax.eval_shape(jax.vmap(lambda x: solver.moving(stage_lane(solver, x))), lanes)
+    count = _fused_instructions(jax.vmap(lambda m: solver.step(m, WALK)), moving)
+    assert count < 3500, count
