@@ -28,7 +28,11 @@ and every other lane as the walk alone.
 On 2026-12-02 an AMD EPYC machine without AVX-512 built the float64 jittered heightfield
 to other bits (same pinned packages); the case recorded there from 89f3759 itself is
 `baseline_89f3759_alt.npz` (its statuses, triangles and found flags equal the main
-recording's; 4 planted P, points and iterations differ by rounding).
+recording's; 4 planted P, points and iterations differ by rounding). An AVX-512 machine
+reproduces that mesh with `NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL"` (`NO_AVX512`), so
+the alternate is checked there too (its own test, in a subprocess) and can be re-recorded
+there: `NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL" python tools/record_baseline.py
+/tmp/alt.npz`, then keep the `jittered_heightfield/float64` keys.
 """
 
 from __future__ import annotations
@@ -135,3 +139,41 @@ def test_the_baseline_covers_every_case(baseline):
                 assert baseline[f"{scene}/{dtype}/{config}/point"].dtype == np.dtype(dtype)
                 statuses |= set(np.unique(status).tolist())
     assert len(statuses) >= 3
+
+
+#: numpy's dispatch without its AVX-512 paths: the float64 jittered heightfield then builds
+#: to the alternate recording's bits, as on the AVX2-only machine that recorded it (numpy's
+#: float64 `arccos`, which the angle-weighted vertex normals use, rounds differently in its
+#: AVX-512 kernel; `cos`, `sin`, `sqrt` and matmul agree; measured 2026-12-02).
+NO_AVX512 = {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL"}
+
+
+def test_the_alternate_recording_is_checked_on_an_avx512_machine_too():
+    """On a CPU with AVX-512 the cases of `ALTERNATES` are checked in a process whose numpy
+    dispatches without it (`NO_AVX512`): its mesh has the alternate's digest, and the
+    package must reproduce the alternate's lanes bit for bit, so a stale alternate fails
+    here, not only on the other machine. (On a CPU without AVX-512 the test above checks
+    the alternate directly.)"""
+    features = np._core._multiarray_umath.__cpu_features__
+    if not features.get("X86_V4", False):
+        pytest.skip("no AVX-512 here: test_solve_reproduces_the_baseline_lanes checks the alternate itself")
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import sys; sys.path.insert(0, 'tests'); import numpy as np, caustics_jax as cj; cj.enable_x64()\n"
+        "import test_baseline as t\n"
+        "alts = [dict(np.load(p, allow_pickle=False)) for p in t.ALTERNATES]\n"
+        "bad = []\n"
+        "for alt in alts:\n"
+        "    for key in [k[:-len('/mesh_sha256')] for k in alt if k.endswith('/mesh_sha256')]:\n"
+        "        scene, dtype = key.split('/')\n"
+        "        mesh, P, L = t.record_baseline.scene_lanes(scene, dtype)\n"
+        "        bad += t._check_case(alt, scene, dtype, mesh, P, L)\n"
+        "print('\\n'.join(bad) or 'ok')\n"
+        "sys.exit(1 if bad else 0)\n")
+    env = {**os.environ, **NO_AVX512}
+    run = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
