@@ -24,7 +24,7 @@
 #   until its slowest lane, the pool's idle slots while it drains: the pool's loop trips
 #   are replayed on the host from the lanes' step counts, exactly as `pools.run_pools`
 #   refills its slots);
-#   Each count twice: XLA's **compiled** programs (after its fusion copies shared values
+#   each counted twice: XLA's **compiled** programs (after its fusion copies shared values
 #   into every consuming kernel) and the **traced** ones (the lowered program, before
 #   XLA's passes);
 # - the **formula** count: the arithmetic the mathematics needs, each formula's own
