@@ -166,24 +166,39 @@ def boundary_crossings(coef) -> BoundaryCrossings:
     """
     dtype = coef.dtype
     eps = float(np.finfo(dtype).eps)
-    zero = VERTEX_ZERO * eps * jnp.max(jnp.abs(coef))
-    values = conic_value(coef, jnp.asarray([[0, 0], [1, 0], [0, 1]], dtype))  # V0, V1, V2
-    nonzero = jnp.all(jnp.abs(values) > zero)
-    pos = values > 0
-    differs = jnp.stack([pos[0] != pos[1], pos[1] != pos[2], pos[0] != pos[2]])  # edges 0, 1, 2
-    third = jnp.argmin(differs)  # the edge whose ends agree (the only one, where clear)
-    edges = jnp.stack([(third + 1) % 3, (third + 2) % 3]).astype(jnp.int32)
+    # Reductions, argmin and indexing over the 3 vertices, 3 edges and 6 coefficients are
+    # written as element-wise maxima and selects (the same values, bit for bit): under
+    # `vmap` XLA:CPU runs a reduction or a gather over such a minor axis of 3 or 6 as a
+    # scalar loop per lane (the argmin and the `any`/`all` were 16% of a crossing step's
+    # kernel time at 512 lanes; docs/solvers.md "Where the walk's time goes on XLA:CPU").
+    A, B, C, D, E, F = (coef[..., i] for i in range(6))
+    biggest = jnp.maximum(jnp.maximum(jnp.maximum(jnp.abs(A), jnp.abs(B)), jnp.maximum(jnp.abs(C), jnp.abs(D))),
+                          jnp.maximum(jnp.abs(E), jnp.abs(F)))
+    zero = VERTEX_ZERO * eps * biggest
+    v0, v1, v2 = F, A + D + F, B + E + F  # eq. 12 at V0, V1, V2 (as `conic_value` there)
+    nonzero = (jnp.abs(v0) > zero) & (jnp.abs(v1) > zero) & (jnp.abs(v2) > zero)
+    p0, p1, p2 = v0 > 0, v1 > 0, v2 > 0
+    d0, d1, d2 = p0 != p1, p1 != p2, p0 != p2  # edges 0, 1, 2: ends of different signs
+    # the edge whose ends agree (the only one, where clear): the first with `~d`
+    third = jnp.where(~d0, 0, jnp.where(~d1, 1, jnp.where(~d2, 2, 0))).astype(jnp.int32)
     quad = edge_quadratics(coef)
-    q2, q1, q0 = quad[third]
+
+    def edge_quad(k):
+        return tuple(jnp.where(k == 0, quad[..., 0, i], jnp.where(k == 1, quad[..., 1, i], quad[..., 2, i]))
+                     for i in range(3))
+
+    q2, q1, q0 = edge_quad(third)
     # The third edge's quadratic at its extremum `t* = -q1 / 2 q2`: a pair of roots on the
     # edge needs `t*` on it and `q(t*)` of the other sign than its end points' (or zero).
     t_star = -q1 / jnp.where(q2 != 0, 2 * q2, 1)
     extremum = q0 + q1 * t_star / 2
     pair = (q2 != 0) & (t_star > 0) & (t_star < 1) & (extremum * jnp.sign(q0) <= zero)
-    roots, valid = edge_quadratic_roots(*jnp.moveaxis(quad[edges], -1, 0))
+    edges = jnp.stack([(third + 1) % 3, (third + 2) % 3]).astype(jnp.int32)
+    ea, eb = edge_quad(edges[0]), edge_quad(edges[1])
+    roots, valid = edge_quadratic_roots(*(jnp.stack([a, b]) for a, b in zip(ea, eb, strict=True)))
     one = valid[:, 0] != valid[:, 1]
     t = jnp.where(valid[:, 0], roots[:, 0], roots[:, 1])
-    clear = nonzero & jnp.any(differs) & ~pair & jnp.all(one)
+    clear = nonzero & (d0 | d1 | d2) & ~pair & one[0] & one[1]
     return BoundaryCrossings(clear, edges, t, edge_barycentric(edges, t))
 
 
@@ -195,11 +210,11 @@ def sign_test_exit(coef, entry_edge, entry_t):
     this face's conic), so that where clear `next_crossing` returns the same exit."""
     bc = boundary_crossings(coef)
     eps = float(np.finfo(coef.dtype).eps)
-    entry_is_a = bc.edge[0] == entry_edge
-    entry = jnp.where(entry_is_a, 0, 1)
-    is_entry = (bc.edge[entry] == entry_edge) & (jnp.abs(bc.t[entry] - entry_t) < 8 * np.sqrt(eps))
-    x = 1 - entry
-    return bc.clear & is_entry, bc.edge[x], bc.t[x], bc.ab[x]
+    a = bc.edge[0] == entry_edge  # the entry is crossing 0, else crossing 1 (selects, not gathers)
+    pick = lambda first, second: jnp.where(a, first, second)  # noqa: E731
+    is_entry = (pick(bc.edge[0], bc.edge[1]) == entry_edge) & (
+        jnp.abs(pick(bc.t[0], bc.t[1]) - entry_t) < 8 * np.sqrt(eps))
+    return bc.clear & is_entry, pick(bc.edge[1], bc.edge[0]), pick(bc.t[1], bc.t[0]), pick(bc.ab[1], bc.ab[0])
 
 
 def inward(edge, dtype):
