@@ -83,10 +83,7 @@ def frame_map(mesh, plane, counts, g, receiver, rng):
     """The photon map of one frame and each texel's receiver footprint (seed 003 feedback)."""
     X, area, texel = emit(plane, counts, g, rng)
     h = trace_photons(mesh, LIGHT, X, intensity=1.0, area=area, eta=ETA, receiver_z=receiver.z)
-    ix = np.floor((h.Y[:, 0] - receiver.x0) / receiver.dx).astype(np.int64)
-    iy = np.floor((h.Y[:, 1] - receiver.y0) / receiver.dy).astype(np.int64)
-    inside = h.valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
-    cell = np.where(inside, iy * receiver.nx + ix, 0)
+    cell, inside = receiver.cells(h.Y, h.valid)
     n_cells = receiver.nx * receiver.ny
     w = np.where(inside, h.flux * h.T, 0.0)
     E = np.bincount(cell, w, n_cells).reshape(receiver.ny, receiver.nx) / receiver.cell_area

@@ -95,10 +95,7 @@ def photon_rows(mesh, light, receiver, n_photons, seed):
     h = trace_photons(mesh, light, X, intensity=1.0, area=plane.area / n_photons, eta=ETA, receiver_z=receiver.z)
     beta = np.asarray(throughput(jnp.asarray(h.cos_i), jnp.asarray(h.t), 1 / ETA, SIGMA_T))
     beta = np.where(h.valid, beta, 0.0)
-    ix = np.floor((h.Y[:, 0] - receiver.x0) / receiver.dx).astype(np.int64)
-    iy = np.floor((h.Y[:, 1] - receiver.y0) / receiver.dy).astype(np.int64)
-    inside = h.valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
-    cell = np.where(inside, iy * receiver.nx + ix, 0)
+    cell, inside = receiver.cells(h.Y, h.valid)
     rho = np.where(inside, albedo(h.Y[:, 0], h.Y[:, 1]), 0.0)
     arriving = inside.sum()
 

@@ -90,10 +90,7 @@ hits = trace_photons(mesh, LIGHT, X, intensity=1.0, area=plane.area / PHOTONS, e
 beta = np.where(hits.valid, np.asarray(throughput(jnp.asarray(hits.cos_i), jnp.asarray(hits.t), 1 / ETA,
                                                   cull.SIGMA_T)), 0.0)
 rho = cull.albedo(hits.Y[:, 0], hits.Y[:, 1])
-ix = np.floor((hits.Y[:, 0] - receiver.x0) / receiver.dx).astype(int)
-iy = np.floor((hits.Y[:, 1] - receiver.y0) / receiver.dy).astype(int)
-inside = hits.valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
-cell = np.where(inside, iy * receiver.nx + ix, 0)
+cell, inside = receiver.cells(hits.Y, hits.valid)
 
 
 def reflected(final):

@@ -103,6 +103,21 @@ class ReceiverGrid(NamedTuple):
         pts = pts.reshape(self.ny, k, self.nx, k, 3).transpose(0, 2, 1, 3, 4)
         return pts.reshape(self.ny, self.nx, k * k, 3)
 
+    def cells(self, xy, valid=None, origin=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+        """The flat cell index `j nx + i` of each point `xy` (`(N, >=2)`, numpy, in a frame
+        moved by `origin`: the grid's bounds minus `origin[:2]`) and whether it lands on the
+        grid (and is `valid`); a point outside gets cell 0, so `np.bincount(cell, weight *
+        inside, nx ny)` bins every point in one call. A cell is half-open, `[x0 + i dx,
+        x0 + (i + 1) dx)`, and `x1`, `y1` are outside. The one binning of receiver points:
+        photon maps, the culling and budget experiments and the notebooks use it."""
+        xy = np.asarray(xy)
+        ix = np.floor((xy[:, 0] - (self.x0 - origin[0])) / self.dx)
+        iy = np.floor((xy[:, 1] - (self.y0 - origin[1])) / self.dy)
+        inside = (ix >= 0) & (ix < self.nx) & (iy >= 0) & (iy < self.ny)
+        if valid is not None:
+            inside &= np.asarray(valid, bool)
+        return np.where(inside, iy * self.nx + ix, 0).astype(np.int64), inside
+
     @classmethod
     def check(cls, receiver, name: str = "receiver") -> ReceiverGrid:
         """`receiver` (a `ReceiverGrid` or its 7 fields) validated: finite bounds with
@@ -410,7 +425,6 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
     L_np = L_np if at_infinity else prep.to_local(L_np)
     plane = EmissionPlane.covering(mesh, L_np)
     light = L.direction if isinstance(L, Directional) else L_np
-    x0, y0 = receiver.x0 - origin[0], receiver.y0 - origin[1]
     bvh = None if mesh.grid is not None else prep.local.bvh  # built once per mesh (`prepare`)
     chunk = min(chunk, power_of_two_bucket(n_photons, 256))
     n_chunks = -(-n_photons // chunk)
@@ -427,11 +441,8 @@ def photon_irradiance(mesh: SurfaceMesh | PreparedSurface, L, *, intensity: floa
             Y, w, valid = (np.asarray(x) for x in _trace_chunk(
                 mesh, bvh, jax.random.fold_in(key, i), *args, jnp.int32(count), chunk=chunk,
                 at_infinity=at_infinity))
-            ix = np.floor((Y[:, 0] - x0) / receiver.dx)
-            iy = np.floor((Y[:, 1] - y0) / receiver.dy)
-            inside = valid & (ix >= 0) & (ix < receiver.nx) & (iy >= 0) & (iy < receiver.ny)
-            cell = (iy[inside] * receiver.nx + ix[inside]).astype(np.int64)
-            w = w[inside].astype(np.float64)
+            cell, inside = receiver.cells(Y, valid, origin)
+            cell, w = cell[inside], w[inside].astype(np.float64)
             E += np.bincount(cell, w, E.size)
             E2 += np.bincount(cell, w * w, E.size)
             hits += np.bincount(cell, minlength=E.size)

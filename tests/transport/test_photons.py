@@ -34,6 +34,24 @@ def test_photons_follow_inverse_square_law_without_refraction(dtype):
     assert pm.n_photons == 1 << 20
 
 
+def test_receiver_cells_are_half_open_row_major_and_move_with_the_frame():
+    """`ReceiverGrid.cells`: cell `j nx + i` holds `[x0 + i dx, x0 + (i+1) dx) x [y0 + j dy, ...)`;
+    the far edges, points off the grid and invalid points land nowhere; in a frame moved by
+    `origin` the same points (minus `origin`) land in the same cells."""
+    grid = ReceiverGrid(0.0, -1.0, 1.0, 2.0, 3.0, 4, 2)  # dx 0.5, dy 0.5
+    xy = np.array([[-1.0, 2.0], [-0.51, 2.49], [-0.5, 2.5], [0.99, 2.99], [1.0, 2.5], [0.0, 3.0],
+                   [-1.01, 2.2], [0.2, 1.99], [0.2, 2.7]])
+    cell, inside = grid.cells(xy)
+    np.testing.assert_array_equal(inside, [1, 1, 1, 1, 0, 0, 0, 0, 1])
+    np.testing.assert_array_equal(cell, [0, 0, 5, 7, 0, 0, 0, 0, 6])
+    centres = grid.centers().reshape(-1, 3)
+    np.testing.assert_array_equal(grid.cells(centres)[0], np.arange(8))
+    valid = np.arange(9) != 8
+    np.testing.assert_array_equal(grid.cells(xy, valid)[1], inside & valid)
+    origin = np.array([100.0, -40.0])
+    np.testing.assert_array_equal(grid.cells(xy - origin, origin=origin)[0], cell)
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_photon_error_falls_as_inverse_sqrt_n(dtype):
     """Flat pool against the exact flat-interface irradiance: the RMS relative error at 16x the
@@ -135,10 +153,8 @@ def test_photons_traced_one_by_one_bin_to_the_flat_interface_irradiance(dtype):
     np.testing.assert_allclose(hits.t[v], -RECEIVER.z / np.sqrt(1 - sin_t**2), rtol=1e-4)
     sigma = 0.4
     w = hits.flux * hits.T * np.exp(-sigma * hits.t)
-    ix = np.floor((hits.Y[:, 0] - RECEIVER.x0) / RECEIVER.dx).astype(int)
-    iy = np.floor((hits.Y[:, 1] - RECEIVER.y0) / RECEIVER.dy).astype(int)
-    inside = v & (ix >= 0) & (ix < RECEIVER.nx) & (iy >= 0) & (iy < RECEIVER.ny)
-    E = np.bincount(iy[inside] * RECEIVER.nx + ix[inside], w[inside], 64).reshape(8, 8) / RECEIVER.cell_area
+    cell, inside = RECEIVER.cells(hits.Y, v)
+    E = np.bincount(cell[inside], w[inside], 64).reshape(8, 8) / RECEIVER.cell_area
 
     def exact(P):
         return flat_interface_irradiance(P, LIGHT, 0.0, 1.333, sigma_t=sigma)
