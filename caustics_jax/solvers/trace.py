@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -142,12 +142,40 @@ def _snap_to_root(coef, edge, t, ab):
     return jnp.where((edge >= 0) & ok, t_all[e, j], t), jnp.where((edge >= 0) & ok, ab_all[e, j], ab), snapped
 
 
+class TraceState(NamedTuple):
+    """A trace between steps: the face it is on, its entry point, travel direction and entry
+    edge, the step and arc counts, how it ended (`_OPEN` while running), and the faces and
+    pieces of the arcs kept so far (`max_arcs` slots each)."""
+
+    face: jax.Array
+    ab: jax.Array
+    direction: jax.Array
+    entry_edge: jax.Array
+    entry_t: jax.Array
+    steps: jax.Array
+    n_arcs: jax.Array
+    end: jax.Array
+    faces: jax.Array
+    pieces: ArcPiece
+
+
+class TraceRecord(NamedTuple):
+    """A lane of `TraceSolver`: `P`, `L`, where its curve closes (`stop`: face, edge, edge
+    parameter of the seed's crossing) and its `TraceState`."""
+
+    P: jax.Array
+    L: jax.Array
+    stop: tuple
+    state: TraceState
+
+
 class TraceSolver(LaneSolver):
     """Following the curve from one seed as a lane solver (`runtime.lane_solver`): one
     phase, a triangle of the curve per step (its arc, the pieces that may hold a root, the
     crossing), until the curve closes, leaves the mesh, is lost, or a cap is reached.
     A lane is `(P, L, seed)`, `seed = (face, ab, direction, entry_edge, entry_t, stop_face,
-    stop_edge, stop_t)`; `finish` gives `(faces (max_arcs,), pieces ArcPiece (max_arcs,),
+    stop_edge, stop_t)`; its stage makes it a `TraceRecord`, each step advances its
+    `TraceState`, and `finish` gives `(faces (max_arcs,), pieces ArcPiece (max_arcs,),
     n_arcs, end, steps)` per lane."""
 
     phases: ClassVar[tuple[str, ...]] = ("trace",)
@@ -166,20 +194,20 @@ class TraceSolver(LaneSolver):
             empty = ArcPiece(jnp.zeros((m, 2), dtype), jnp.zeros((m, 2), dtype), jnp.zeros((m, 2), dtype),
                              jnp.zeros(m, dtype), jnp.zeros(m, dtype), jnp.zeros((m, 2), dtype), jnp.zeros(m, bool),
                              jnp.zeros(m, bool))
-            state = (face, ab, direction, entry_edge, entry_t, jnp.int32(0), jnp.int32(0), jnp.int32(_OPEN),
-                     jnp.full(m, -1, jnp.int32), empty)
-            return (P, L, (stop_face, stop_edge, stop_t), state)
+            state = TraceState(face, ab, direction, entry_edge, entry_t, jnp.int32(0), jnp.int32(0),
+                               jnp.int32(_OPEN), jnp.full(m, -1, jnp.int32), empty)
+            return TraceRecord(P, L, (stop_face, stop_edge, stop_t), state)
 
         return (Stage(init),)
 
     def route(self, rec) -> jax.Array:
-        return jnp.where(rec[3][7] == _OPEN, 0, -1).astype(jnp.int32)
+        return jnp.where(rec.state.end == _OPEN, 0, -1).astype(jnp.int32)
 
     def step(self, rec, phase: int | None):
         del phase  # one phase
         P, L, (stop_face, stop_edge, stop_t), s = rec
         mesh, max_arcs = self.mesh, self.max_arcs
-        face, ab, direction, entry_edge, entry_t, steps, n_arcs, end, faces_buf, buf = s
+        face, ab, direction, entry_edge, entry_t, steps, n_arcs, _, faces_buf, buf = s
         dtype = ab.dtype
         centre, radius, axis, angle = self.cones
         tol_t = 1e3 * jnp.sqrt(jnp.finfo(dtype).eps)
@@ -202,13 +230,13 @@ class TraceSolver(LaneSolver):
         closed = (g == stop_face) & (k_next == stop_edge) & (jnp.abs(t_next - stop_t) <= tol_t)
         end = jnp.where(~ok, _LOST, jnp.where(n_arcs > max_arcs, _OVERFLOW, jnp.where(
             g < 0, _BOUNDARY, jnp.where(closed, _CLOSED, jnp.where(steps + 1 >= self.max_steps, _STEPS, _OPEN)))))
-        s = (jnp.maximum(g, 0), ab_next, inward(k_next, dtype), k_next, t_next, steps + 1,
-             jnp.minimum(n_arcs, max_arcs + 1), end.astype(jnp.int32), faces_buf, buf)
-        return (P, L, (stop_face, stop_edge, stop_t), s)
+        s = TraceState(jnp.maximum(g, 0), ab_next, inward(k_next, dtype), k_next, t_next, steps + 1,
+                       jnp.minimum(n_arcs, max_arcs + 1), end.astype(jnp.int32), faces_buf, buf)
+        return rec._replace(state=s)
 
     def finish(self, rec):
-        s = rec[3]
-        return s[8], s[9], jnp.minimum(s[6], self.max_arcs), s[7], s[5]
+        s = rec.state
+        return s.faces, s.pieces, jnp.minimum(s.n_arcs, self.max_arcs), s.end, s.steps
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps", "max_arcs"))
