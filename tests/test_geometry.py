@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from caustics_jax import fresnel_reflectance, fresnel_transmittance, reflect, refract, safe_normalize
-from caustics_jax.math.geometry import safe_sqrt
+from caustics_jax.math.geometry import beer_lambert, safe_sqrt
 from caustics_jax.testing import oracle
 
 DTYPES = [jnp.float32, jnp.float64]
@@ -117,6 +117,21 @@ def test_fresnel_matches_textbook_value_for_water():
     R = float(fresnel_reflectance(jnp.asarray(cos_i, jnp.float64), 1 / n))
     assert abs(R - (rs + rp) / 2) < 1e-12
     assert abs(R - 0.0597) < 2e-4
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_beer_lambert_halves_over_the_half_length_and_ignores_what_is_not_a_path(dtype):
+    """`A = exp(-sigma_t t)`: sigma_t = ln 2 / 0.5 m halves the energy every 0.5 m (1/2, 1/4,
+    1/8 at 0.5, 1, 1.5 m, 1 at t = 0); a negative length attenuates nothing; clear water
+    (sigma_t = 0) attenuates nothing even over an infinite length, murky water absorbs all
+    of it; the dtype of `t` is kept. Called once, on one array, for every case."""
+    sigma = np.log(2) / 0.5
+    t = jnp.asarray([0.0, 0.5, 1.0, 1.5, -2.0, np.inf], dtype)
+    A = np.asarray(beer_lambert(jnp.asarray(sigma, dtype), t))
+    assert A.dtype == dtype
+    np.testing.assert_allclose(A, [1, 0.5, 0.25, 0.125, 1, 0], rtol=TOL[dtype])
+    clear = np.asarray(beer_lambert(jnp.asarray(0.0, dtype), t))
+    np.testing.assert_array_equal(clear, np.ones(6))
 
 
 @pytest.mark.parametrize("dtype", DTYPES)

@@ -31,7 +31,7 @@ import enum
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..math.geometry import fresnel_transmittance
+from ..math.geometry import beer_lambert, fresnel_transmittance
 from ..runtime.kernel_contract import float_inputs
 from ._util import as_float, float_dtype
 
@@ -57,10 +57,7 @@ def throughput(cos_i: Float[Array, "*batch"], t: Float[Array, "*batch"], eta, si
     """
     dtype = float_dtype(cos_i, t)
     T = fresnel_transmittance(jnp.asarray(cos_i, dtype), as_float(eta, dtype))
-    sigma_t = as_float(sigma_t, dtype)
-    # clear water (sigma_t = 0) attenuates nothing, also over an infinite t (0 inf is NaN)
-    optical_depth = jnp.where(sigma_t > 0, sigma_t * jnp.maximum(jnp.asarray(t, dtype), 0), 0)
-    return T * jnp.exp(-optical_depth)
+    return T * beer_lambert(as_float(sigma_t, dtype), jnp.asarray(t, dtype))
 
 
 @float_inputs("energy", "threshold")

@@ -163,3 +163,15 @@ def fresnel_reflectance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*ba
 def fresnel_transmittance(cos_i: Float[Array, "*batch"], eta) -> Float[Array, "*batch"]:
     """Exact unpolarised dielectric Fresnel transmittance `1 - R` (energy, not radiance)."""
     return 1 - fresnel_reflectance(cos_i, eta)
+
+
+def beer_lambert(sigma_t, t: Float[Array, "*batch"]) -> Float[Array, "*batch"]:
+    """`A = exp(-sigma_t t)`: Beer-Lambert attenuation over a path of length `t` in the
+    medium (the `A` of seed 001 eq. 25; seed 003's throughput is `T A`). Negative `t` is
+    clipped to 0 (so `A <= 1`), and `sigma_t <= 0` attenuates nothing, an infinite `t`
+    included (`0 inf` would be NaN); callers check `sigma_t >= 0` at their boundary. The
+    one transcription of the factor: `path_irradiance`, the photons, the photon
+    differentials and `kernels.culling.throughput` use it."""
+    t = jnp.asarray(t)
+    optical_depth = jnp.where(sigma_t > 0, sigma_t * jnp.maximum(t, 0), 0)
+    return jnp.exp(-optical_depth).astype(t.dtype)

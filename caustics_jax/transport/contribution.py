@@ -37,7 +37,7 @@ from jaxtyping import Array, Bool, Float
 
 from ..accel.prepared import PreparedSurface, prepare
 from ..math.barycentric import barycentric_coordinates, barycentric_point
-from ..math.geometry import dot, fresnel_transmittance, norm, unit_vector
+from ..math.geometry import beer_lambert, dot, fresnel_transmittance, norm, unit_vector
 from ..math.objectives import path_vectors
 from ..runtime.arguments import check_bool, check_fits, check_points, check_real, real_array
 from ..runtime.kernel_contract import float_inputs, in_domain
@@ -95,7 +95,7 @@ def path_irradiance(
     T = fresnel_transmittance(dot(w_L, n_s), 1 / eta)
     cos_P = jnp.maximum(-dot(w_P, n_P), 0)
     M = barycentric_point(V, ab)
-    A = jnp.exp(-sigma_t * norm(P - M))
+    A = beer_lambert(sigma_t, norm(P - M))
     d_L = norm(L - M)
     # I_e / d_L^2: the irradiance perpendicular to the rays at M (a directional light's E_perp)
     E_perp = jnp.where(at_infinity, intensity, intensity / jnp.where(d_L > 0, d_L, 1) ** 2)

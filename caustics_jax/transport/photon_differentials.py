@@ -40,6 +40,7 @@ from jaxtyping import Array, Bool, Float
 
 from ..math.barycentric import barycentric_coordinates, interpolated_normal
 from ..math.geometry import (
+    beer_lambert,
     dot,
     norm,
     reflect,
@@ -360,7 +361,7 @@ def photon_differential_irradiance(V, N, L, X, eta, intensity, receiver_point, r
     # their domain (negative, NaN or inf: intensity = inf had given E = inf valid) is invalid.
     intensity, sigma_t = jnp.asarray(intensity, dtype), jnp.asarray(sigma_t, dtype)
     ok = ok & (det > validity_threshold(dtype) * scale) & in_domain(intensity, lo=0) & in_domain(sigma_t, lo=0)
-    E = (jnp.where(ok, intensity, 0) * T * jnp.exp(-jnp.where(ok, sigma_t, 0) * t) * jnp.abs(cos_e)
+    E = (jnp.where(ok, intensity, 0) * T * beer_lambert(jnp.where(ok, sigma_t, 0), t) * jnp.abs(cos_e)
          * safe_div(1, r_e**2 * det, ok))
     return jnp.where(ok, E, 0), Y, ok
 

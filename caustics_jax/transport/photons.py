@@ -40,7 +40,7 @@ import numpy as np
 from ..accel.prepared import PreparedSurface, kept_accel, prepare
 from ..accel.start_points import first_crossing
 from ..math.barycentric import barycentric_point, interpolated_normal
-from ..math.geometry import dot, fresnel_transmittance, refract, safe_normalize
+from ..math.geometry import beer_lambert, dot, fresnel_transmittance, refract, safe_normalize
 from ..runtime.arguments import check_eta, check_fits, check_int, check_points, check_real
 from ..runtime.lanes import power_of_two_bucket
 from ..runtime.precision import check_mesh_dtype
@@ -284,7 +284,7 @@ def _trace_chunk(mesh, bvh, key, L, plane, z_r, eta, sigma_t, intensity, n_total
         flux, d = emitted_flux(L, X, z_e, intensity, A_e / n_total)
     Y, T, t, hit, _ = propagate_photons(mesh, bvh, X, d, (x1 - x0) + (y1 - y0), z_r, eta)
     valid = hit & (jnp.arange(chunk) < count)
-    w = jnp.where(valid, flux * T * jnp.exp(-sigma_t * t), 0)
+    w = jnp.where(valid, flux * T * beer_lambert(sigma_t, t), 0)
     return Y, w.astype(dtype), valid
 
 
