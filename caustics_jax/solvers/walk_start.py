@@ -31,7 +31,7 @@ from ..curve.arcs import (
 from ..math.conic import conic_tangent
 from ..math.objectives import ObjectiveStatus, bracket_objective, path_vectors
 from ._solution import Status
-from .walk_steps import BISECT, DONE, WALK, WalkState, face_frame
+from .walk_steps import BISECT, DONE, WALK, Replaced, Search, WalkState, face_frame
 
 __all__ = ["Ellipse", "Start", "ellipse_bracket", "first_triangle", "start_states"]
 
@@ -176,7 +176,7 @@ def first_triangle(mesh, P, L, face, ab0, found, eta, tol, lean: bool = False):
         # The arc of each direction runs into TIR (or BACKWARD) from a transmitting near point.
         tir_arc_p=okp & (st_all[3] == OK) & lost(stp), tir_arc_m=okm & (st_all[4] == OK) & lost(stm),
         # ... or out of it: M0 totally reflecting (or BACKWARD), the exit transmitting, the
-        # root between the onset and the exit (as `_walk_update`'s tir_end -1).
+        # root between the onset and the exit (as `_walk_update`'s `Search.LO`).
         tir_out_p=okp & lost(st_all[3]) & (stp == OK), tir_out_m=okm & lost(st_all[4]) & (stm == OK),
         degenerate_exit_p=stp == DEG, degenerate_exit_m=stm == DEG, at_m0=at_m0,
         # A singular conic at a solution M0 does not matter (P, L and the normal aligned
@@ -231,7 +231,7 @@ def start_states(start: Start):
         # No sign change, and the arc of the walk direction runs into TIR: search it
         # towards the onset first (`_bisect_update`; P within 1e-6 m of the surface puts
         # the root 1e-9 m from M0 and the rest of the triangle in TIR). Without a root
-        # there the walk goes on as before (tir_end = 2).
+        # there the walk goes on as before (`Search.HI`).
         tir_arc = jnp.where(walk_m, fl["tir_arc_m"], fl["tir_arc_p"])
         tir_out = jnp.where(walk_m, fl["tir_out_m"], fl["tir_out_p"])
         search = ~is_ellipse & ~(br_p | br_m) & (tir_arc | tir_out)
@@ -270,8 +270,8 @@ def start_states(start: Start):
             exit_k=pm(start.k, pick_m), exit_t=pm(start.t, pick_m), exit_ab=pm(start.ab, pick_m),
             f_exit=pm(start.f, pick_m), st_exit=pm(start.st, pick_m), g_exit=pm(start.g, pick_m),
             anchor=start.ab0, tau=tau, perp=perp, phi_lo=phi_lo, phi_hi=phi_hi, f_lo=f_lo, f_hi=f_hi,
-            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(0, jnp.int32),
-            tir_end=jnp.where(searching, jnp.where(tir_arc, 2, -1), 0).astype(jnp.int32),
+            ab_lo=ab_lo, ab_hi=ab_hi, side=jnp.asarray(Replaced.NONE, jnp.int32),
+            tir_end=jnp.where(searching, jnp.where(tir_arc, Search.HI, Search.LO), Search.NONE).astype(jnp.int32),
             best_ab=start.ab0,
             best_f=start.f0, steps=jnp.asarray(0, jnp.int32), crossed=jnp.asarray(0, jnp.int32),
         )

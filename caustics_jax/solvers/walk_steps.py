@@ -12,6 +12,7 @@ face's entry takes it from the previous exit, a cut is evaluated once.
 
 from __future__ import annotations
 
+import enum
 from typing import NamedTuple
 
 import jax
@@ -36,13 +37,45 @@ from ..runtime.fusion import stored
 from ..surface.mesh import cross_edge
 from ._solution import Status
 
-__all__ = ["BISECT", "DONE", "EXACT", "PHASES", "WALK", "WalkState", "face_frame", "walk_step"]
+__all__ = ["BISECT", "DONE", "EXACT", "PHASES", "WALK", "Phase", "Replaced", "Search", "WalkState", "face_frame",
+           "walk_step"]
 
-#: Phases of a lane (`WalkState.mode`): a crossing decided by the vertex signs (`WALK`), a
-#: refinement cut (`BISECT`), a crossing by the exact construction (`EXACT`: the lanes
-#: the signs leave undecided, `arcs.sign_test_exit`), done. The pool scheduler steps each
-#: phase in its own pool (`run_pools`), so the exact construction runs on those lanes only.
-WALK, BISECT, EXACT, DONE = 0, 1, 2, 3
+class Phase(enum.IntEnum):
+    """A lane's phase (`WalkState.mode`): a crossing decided by the vertex signs (`WALK`),
+    a refinement cut (`BISECT`), a crossing by the exact construction (`EXACT`: the lanes
+    the signs leave undecided, `arcs.sign_test_exit`), done. The pool scheduler steps each
+    phase in its own pool (`run_pools`), so the exact construction runs on those lanes
+    only; a phase's value is its pool's index."""
+
+    WALK = 0
+    BISECT = 1
+    EXACT = 2
+    DONE = 3
+
+
+WALK, BISECT, EXACT, DONE = Phase.WALK, Phase.BISECT, Phase.EXACT, Phase.DONE
+
+
+class Search(enum.IntEnum):
+    """A bracket with one end totally reflecting or BACKWARD (`WalkState.tir_end`), where
+    `f` has no sign to compare: the cuts close in on the onset there (`_bisect_update`).
+    The member says which end is lost and what the lane does when the search ends
+    without a root."""
+
+    NONE = 0  # a plain bracket: f changes sign between its ends
+    LO = -1  # the lo end (the arc's entry) is lost; no root: walk on from the arc's exit
+    HI_TIR = 1  # the hi end (the exit) reflects totally; no root: the walk ends (TIR)
+    HI = 2  # the hi end is lost (BACKWARD, or the first triangle's arc into TIR); no root: walk on
+
+
+class Replaced(enum.IntEnum):
+    """Illinois bookkeeping (`WalkState.side`): the bracket end the last cut replaced."""
+
+    NONE = 0
+    LO = -1
+    HI = 1
+
+
 #: The stepped phases' names, in index order (`runtime.lane_solver.LaneSolver.phases`).
 PHASES = ("walk", "bisect", "exact")
 
@@ -70,8 +103,8 @@ class WalkState(NamedTuple):
     f_hi: jax.Array
     ab_lo: jax.Array  # bracket ends as points (for the chord fallback)
     ab_hi: jax.Array
-    side: jax.Array  # Illinois: which end was replaced last (-1 lo, +1 hi, 0 none)
-    tir_end: jax.Array  # TIR search: which bracket end is totally reflecting (-1 lo, +1 or 2 hi, 0 none)
+    side: jax.Array  # Illinois: which end the last cut replaced (`Replaced`)
+    tir_end: jax.Array  # the onset search: which bracket end is lost, and what no root means (`Search`)
     best_ab: jax.Array
     best_f: jax.Array
     steps: jax.Array
@@ -131,12 +164,13 @@ def _walk_update(s: WalkState, g, e, geometry, fx, stx, gx, tol) -> WalkState:
     TIR, BACKWARD = ObjectiveStatus.TOTAL_INTERNAL_REFLECTION, ObjectiveStatus.BACKWARD
     # An arc into BACKWARD (the refracted ray turns away from L) is searched the same way
     # (a receiver 0.1 m under a wave: f 0.007 at the entry, -0.99 BACKWARD at the exit, the
-    # root between); without a root there the walk goes on (2), as it always did through
-    # BACKWARD stretches.
-    tir_end = jnp.where(ok & e_ok & (stx == TIR), 1, jnp.where(ok & e_ok & (stx == BACKWARD), 2, jnp.where(
-        ok & ((st_e == TIR) | (st_e == BACKWARD)) & x_ok, -1, 0)))
+    # root between); without a root there the walk goes on (`Search.HI`), as it always did
+    # through BACKWARD stretches.
+    tir_end = jnp.where(ok & e_ok & (stx == TIR), Search.HI_TIR, jnp.where(
+        ok & e_ok & (stx == BACKWARD), Search.HI, jnp.where(
+            ok & ((st_e == TIR) | (st_e == BACKWARD)) & x_ok, Search.LO, Search.NONE)))
 
-    status, mode = s.status, jnp.where(bracket | (tir_end != 0), BISECT, WALK)
+    status, mode = s.status, jnp.where(bracket | (tir_end != Search.NONE), BISECT, WALK)
     for cond, code in ((lost, Status.LOST_CURVE),
                        (found_x, Status.FOUND), (found_e, Status.FOUND), (left, Status.LEFT_MESH)):
         mode = jnp.where(cond, DONE, mode)
@@ -151,7 +185,7 @@ def _walk_update(s: WalkState, g, e, geometry, fx, stx, gx, tol) -> WalkState:
         exit_k=k, exit_t=tt, exit_ab=ab, f_exit=fx, st_exit=stx.astype(jnp.int32), g_exit=gx, anchor=e,
         tau=tau, perp=perp,
         phi_lo=jnp.zeros_like(phi), phi_hi=phi, f_lo=f_e, f_hi=fx, ab_lo=e, ab_hi=ab,
-        side=jnp.zeros_like(s.side), tir_end=tir_end.astype(jnp.int32),
+        side=jnp.full_like(s.side, Replaced.NONE), tir_end=tir_end.astype(jnp.int32),
         best_ab=best_ab, best_f=best_f, steps=s.steps + 1, crossed=s.crossed + jnp.where(left, 0, 1),
     )
 
@@ -180,7 +214,7 @@ def _bisect_geometry(coef, s: WalkState, illinois: bool):
     if illinois:
         frac = -s.f_lo / jnp.where(denom != 0, denom, 1)  # false position, from the lo end
         lam = jnp.where(denom != 0, jnp.clip(frac, 1e-6, 1 - 1e-6), 0.5)
-        lam = jnp.where(s.tir_end != 0, 0.5, lam)  # f is 0 at a TIR end: no false position
+        lam = jnp.where(s.tir_end != Search.NONE, 0.5, lam)  # f is 0 at a TIR end: no false position
     phi_try = s.phi_lo + lam * (s.phi_hi - s.phi_lo)
     p_pencil, ok_pencil = pencil_point(coef, s.anchor, s.tau, s.perp, phi_try)
     p_chord, ok_chord = _chord_point(coef, s.ab_lo, s.ab_hi, lam)
@@ -198,7 +232,8 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     """Replace a bracket end by the cut `p` (pencil angle `phi`, from the chord cut where
     `chord`), or end the lane: FOUND, a stalled bracket, a TIR search without a root."""
     transmits = stm == ObjectiveStatus.OK
-    searching = s.tir_end != 0
+    searching = s.tir_end != Search.NONE
+    hi_lost = (s.tir_end == Search.HI_TIR) | (s.tir_end == Search.HI)
     # In a search a BACKWARD cut sits on the far side of the onset, as a TIR one does.
     tir_mid = searching & ((stm == ObjectiveStatus.TOTAL_INTERNAL_REFLECTION) | (stm == ObjectiveStatus.BACKWARD))
     ok = ok & (transmits | tir_mid)
@@ -206,11 +241,11 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     # TIR search (`_walk_update`): p replaces the TIR end when it reflects too, or when f
     # changed sign against the transmitting end (then [that end, p] is a plain bracket);
     # otherwise p replaces the transmitting end, closing in on the onset of TIR.
-    f_ok_end = jnp.where(s.tir_end > 0, s.f_lo, s.f_hi)
+    f_ok_end = jnp.where(hi_lost, s.f_lo, s.f_hi)
     flipped = transmits & opposite(fm, f_ok_end)
     replace_tir_end = tir_mid | flipped
-    to_hi = jnp.where(searching, jnp.where(s.tir_end > 0, replace_tir_end, ~replace_tir_end), to_hi)
-    tir_end = jnp.where(flipped, 0, s.tir_end)
+    to_hi = jnp.where(searching, jnp.where(hi_lost, replace_tir_end, ~replace_tir_end), to_hi)
+    tir_end = jnp.where(flipped, Search.NONE, s.tir_end)
     phi_lo = jnp.where(to_hi, s.phi_lo, phi)
     phi_hi = jnp.where(to_hi, phi, s.phi_hi)
     ab_lo = jnp.where(to_hi, s.ab_lo, p)
@@ -218,9 +253,9 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     f_lo = jnp.where(to_hi, s.f_lo, fm)
     f_hi = jnp.where(to_hi, fm, s.f_hi)
     if illinois:  # halve the stale end's value when the same end is kept twice
-        side = jnp.where(searching, 0, jnp.where(to_hi, 1, -1))
-        f_lo = jnp.where(to_hi & (s.side == 1), f_lo / 2, f_lo)
-        f_hi = jnp.where(~to_hi & (s.side == -1), f_hi / 2, f_hi)
+        side = jnp.where(searching, Replaced.NONE, jnp.where(to_hi, Replaced.HI, Replaced.LO))
+        f_lo = jnp.where(to_hi & (s.side == Replaced.HI), f_lo / 2, f_lo)
+        f_hi = jnp.where(~to_hi & (s.side == Replaced.LO), f_hi / 2, f_hi)
     else:
         side = s.side
     found = ok & transmits & (jnp.abs(fm) <= tol)
@@ -239,11 +274,12 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
     status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
     # A TIR search that closed in on the onset without a sign change found no root: a walk
-    # into TIR ends there (tir_end 1), a walk out of it (-1) or out of the first triangle
-    # (2) goes on from the arc's exit.
-    no_root = stalled & ~found & (tir_end != 0)
-    mode = jnp.where(no_root, jnp.where(tir_end == 1, DONE, WALK), mode)
-    status = jnp.where(no_root, jnp.where(tir_end == 1, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
+    # into TIR ends there (`Search.HI_TIR`), a walk out of it (`LO`) or out of the first
+    # triangle (`HI`) goes on from the arc's exit.
+    no_root = stalled & ~found & (tir_end != Search.NONE)
+    ends = tir_end == Search.HI_TIR
+    mode = jnp.where(no_root, jnp.where(ends, DONE, WALK), mode)
+    status = jnp.where(no_root, jnp.where(ends, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
     better = ok & transmits & (jnp.abs(fm) < jnp.abs(s.best_f))
     keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
     return s._replace(
