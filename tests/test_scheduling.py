@@ -18,6 +18,7 @@ from caustics_jax import Newton, Walk, scenes, solve
 from caustics_jax.runtime import compilation
 from caustics_jax.runtime.blocks import run_blocks
 from caustics_jax.runtime.lane_solver import SCHEDULERS, LaneSolver, Stage, run_lanes
+from caustics_jax.runtime.lanes import LanePacking
 from caustics_jax.runtime.pools import map_where, run_pools
 from caustics_jax.testing import assert_same_lanes
 
@@ -176,6 +177,28 @@ def test_run_pools_moves_lanes_of_every_dtype_and_shape_exactly():
     for key in state:
         assert got[key].dtype == state[key].dtype and got[key].shape == state[key].shape, key
         np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), err_msg=key)
+
+
+def test_lane_packing_carries_booleans_as_bits_32_to_an_int32_column():
+    """45 booleans in leaves of shapes (), (40,), (2, 2) and one empty leaf travel as two
+    int32 columns after the int32 leaf's (bit 31 included), and unpack to the same values,
+    dtypes and shapes; a tree without booleans packs as before."""
+    rng = np.random.default_rng(3)
+    n = 64
+    tree = {"a": jnp.asarray(rng.normal(size=(n, 3)), jnp.float32), "b": jnp.asarray(rng.integers(0, 2, (n, 40)), bool),
+            "c": jnp.asarray(rng.integers(-5, 5, n), jnp.int32), "d": jnp.ones(n, bool),
+            "e": jnp.asarray(rng.integers(0, 2, (n, 2, 2)), bool), "f": jnp.ones((n, 0), bool)}
+    packing = LanePacking(tree)
+    floats, ints = jax.jit(packing.pack)(tree)
+    assert floats.shape == (n, 3) and ints.shape == (n, 1 + 2) and ints.dtype == jnp.int32
+    back = jax.jit(packing.unpack)((floats, ints))
+    for key in tree:
+        assert back[key].dtype == tree[key].dtype and back[key].shape == tree[key].shape, key
+        np.testing.assert_array_equal(np.asarray(back[key]), np.asarray(tree[key]), err_msg=key)
+    word = np.asarray(ints[:, 1]).view(np.uint32)  # bits 0-31: the first 32 of "b"
+    np.testing.assert_array_equal((word[:, None] >> np.arange(32)) & 1, np.asarray(tree["b"][:, :32]))
+    plain = {"a": tree["a"], "c": tree["c"]}
+    assert [x.shape for x in LanePacking(plain).pack(plain)] == [(n, 3), (n, 1)]
 
 
 def test_map_where_computes_only_the_needed_lanes():

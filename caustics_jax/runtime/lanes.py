@@ -93,31 +93,61 @@ def select_lanes(mask, new, old):
 
 
 class LanePacking:
-    """A pytree of per-lane arrays as one `(lanes, width)` matrix per dtype (bools as
-    int32), so that moving lanes in and out of a pool's slots is a few gathers and
-    scatters instead of one per leaf (the walk's lane state has about 50 leaves; each
-    gather or scatter is its own kernel to compile and run). Exact: only data moves."""
+    """A pytree of per-lane arrays as one `(lanes, width)` matrix per dtype, so that moving
+    lanes in and out of a pool's slots is a few gathers and scatters instead of one per
+    leaf (the walk's lane state has about 50 leaves; each gather or scatter is its own
+    kernel to compile and run). Booleans travel as the bits of int32 columns, 32 to a
+    column: a solver keeps its decisions as named boolean fields, and they move, and are
+    stored, as one word (XLA:CPU computes the word in one kernel, where it gave each
+    boolean column a kernel of its own). Exact: only data moves."""
+
+    _BITS = 32
 
     def __init__(self, tree):
         leaves, self.treedef = jax.tree.flatten(tree)
         self.kinds = [jnp.dtype(jnp.int32) if x.dtype == jnp.bool_ else x.dtype for x in leaves]
         self.groups = list(dict.fromkeys(self.kinds))
         self.layout, widths = [], dict.fromkeys(self.groups, 0)
+        bit = 0  # booleans: bit `bit % 32` of the int32 columns after the int32 leaves'
         for x, kind in zip(leaves, self.kinds, strict=True):
             size = int(np.prod(x.shape[1:], dtype=np.int64))
-            self.layout.append((kind, widths[kind], size, x.shape[1:], x.dtype))
-            widths[kind] += size
+            if x.dtype == jnp.bool_:
+                self.layout.append((kind, bit, size, x.shape[1:], x.dtype))
+                bit += size
+            else:
+                self.layout.append((kind, widths[kind], size, x.shape[1:], x.dtype))
+                widths[kind] += size
+        self.bits = bit
+        self.bit_base = widths.get(jnp.dtype(jnp.int32), 0)  # the first bit column's index
 
     def pack(self, tree) -> tuple:
         leaves = jax.tree.leaves(tree)
         n = leaves[0].shape[0]
         parts: dict = {g: [] for g in self.groups}
+        bools = []
         for x, kind in zip(leaves, self.kinds, strict=True):
-            parts[kind].append(x.reshape(n, -1).astype(kind))
+            if x.dtype == jnp.bool_:
+                bools.append(x.reshape(n, -1))
+            else:
+                parts[kind].append(x.reshape(n, -1).astype(kind))
+        columns = [b[:, i].astype(jnp.int32) for b in bools for i in range(b.shape[1])]
+        for lo in range(0, self.bits, self._BITS):
+            word = columns[lo]
+            for j in range(1, min(self._BITS, self.bits - lo)):  # element-wise: one fused kernel
+                word = word | (columns[lo + j] << j)
+            parts[jnp.dtype(jnp.int32)].append(word[:, None])
         return tuple(jnp.concatenate(parts[g], axis=1) for g in self.groups)
 
     def unpack(self, packed: tuple):
         mats = dict(zip(self.groups, packed, strict=True))
-        leaves = [mats[kind][:, lo:lo + size].reshape(mats[kind].shape[:1] + shape).astype(dtype)
-                  for kind, lo, size, shape, dtype in self.layout]
+        leaves = []
+        for kind, lo, size, shape, dtype in self.layout:
+            mat = mats[kind]
+            if dtype == jnp.bool_:
+                idx = lo + np.arange(size)
+                words = mat[:, self.bit_base + idx // self._BITS]
+                bits = (words >> jnp.asarray(idx % self._BITS, jnp.int32)) & 1
+                leaves.append((bits != 0).reshape(mat.shape[:1] + shape))
+            else:
+                leaves.append(mat[:, lo:lo + size].reshape(mat.shape[:1] + shape).astype(dtype))
         return jax.tree.unflatten(self.treedef, leaves)

@@ -54,16 +54,38 @@ class Ellipse(NamedTuple):
     st_near: jax.Array  # (2,)
 
 
+class Decisions(NamedTuple):
+    """The first triangle's decisions (`first_triangle`), per lane; `_p` / `_m`: of the
+    `+t0` / `-t0` direction."""
+
+    found: jax.Array  # the lane has a start point
+    is_ellipse: jax.Array  # no edge crossing in either direction (§3.4.4)
+    br_p: jax.Array  # f changes sign on the direction's arc
+    br_m: jax.Array
+    use_m_bracket: jax.Array  # both bracket: the -t0 one comes first
+    walk_m: jax.Array  # no bracket: walk towards -t0
+    tir_arc_p: jax.Array  # the arc runs into TIR (or BACKWARD) from a transmitting near point
+    tir_arc_m: jax.Array
+    degenerate_exit_p: jax.Array
+    degenerate_exit_m: jax.Array
+    at_m0: jax.Array  # M0 itself is a solution
+    degenerate: jax.Array  # a singular conic or a degenerate f at M0
+    okp: jax.Array  # the direction has an exit
+    okm: jax.Array
+    tir_out_p: jax.Array  # the arc runs out of TIR (or BACKWARD): M0 reflects, the exit transmits
+    tir_out_m: jax.Array
+
+
 class Start(NamedTuple):
     """What `first_triangle` found from `M0`, per lane; `start_states` builds the walks.
 
-    `flags` holds its booleans (`_FLAGS`) as the bits of one int32: the scheduler stores
-    this record before building the states, and a stored value is computed once. XLA's
-    CPU fusion copies a cheap producer into every kernel that reads it, so each of the
+    The scheduler stores this record before building the states (`Stage`: each stage's
+    result is stored before the next reads it), so each decision is computed once: XLA's
+    CPU fusion copies a cheap producer into every kernel that reads it, and each of the
     two walks' ~25 state fields had recomputed the same chain of ~150 objective-status
     and sign tests. Pairs `(2, ...)` are the `+t0` and `-t0` directions."""
 
-    flags: jax.Array
+    decisions: Decisions
     face: jax.Array
     ab0: jax.Array
     f0: jax.Array
@@ -171,7 +193,7 @@ def first_triangle(mesh, P, L, face, ab0, found, eta, tol, lean: bool = False):
     # the near point and the onset (a receiver 0.1 m under a flat surface: f 0.21 at the
     # near point, -0.99 BACKWARD at the exit, the solution 0.017 m from M0 on that arc).
     lost = lambda st: (st == TIR) | (st == ObjectiveStatus.BACKWARD)  # noqa: E731
-    flags = dict(
+    decisions = Decisions(
         found=found, is_ellipse=~okp & ~okm, br_p=br_p, br_m=br_m, use_m_bracket=use_m_bracket, walk_m=walk_m,
         # The arc of each direction runs into TIR (or BACKWARD) from a transmitting near point.
         tir_arc_p=okp & (st_all[3] == OK) & lost(stp), tir_arc_m=okm & (st_all[4] == OK) & lost(stm),
@@ -185,24 +207,10 @@ def first_triangle(mesh, P, L, face, ab0, found, eta, tol, lean: bool = False):
     ellipse = Ellipse(coef, tau_e, perp_e, jnp.stack([nearp, nearm]), phisp, jnp.stack([fsp, fsm]),
                        jnp.stack([gsp, gsm]), st_all[3:5])
     _, k, t, ab, phi, tau, perp, phi_s, near, _ = dirs
-    start = Start(_pack_flags(flags), face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]),
+    start = Start(decisions, face.astype(jnp.int32), ab0, f0, k, t, ab, jnp.stack([fp, fm]),
                    jnp.stack([stp, stm]), jnp.stack([gp, gm]), phi, phi_s, jnp.stack([fsp, fsm]), near, tau, perp,
                    ellipse)
     return (start, clear) if lean else start
-
-
-#: The booleans of `Start.flags`, bit i = name i.
-_FLAGS = ("found", "is_ellipse", "br_p", "br_m", "use_m_bracket", "walk_m", "tir_arc_p", "tir_arc_m",
-          "degenerate_exit_p", "degenerate_exit_m", "at_m0", "degenerate", "okp", "okm", "tir_out_p", "tir_out_m")
-
-
-def _pack_flags(flags: dict) -> jax.Array:
-    """`_FLAGS` as the bits of one int32 (`Start`)."""
-    return sum(flags[name].astype(jnp.int32) << i for i, name in enumerate(_FLAGS))
-
-
-def _unpack_flags(bits) -> dict:
-    return {name: (bits >> i) & 1 == 1 for i, name in enumerate(_FLAGS)}
 
 
 def start_states(start: Start):
@@ -216,7 +224,7 @@ def start_states(start: Start):
     state reads `UNRESOLVED_ELLIPSE` (unless `M0` is a solution, degenerate, or has no
     start point) until `ellipse_bracket` has sampled the curve (`ellipse`: its inputs).
     """
-    fl = _unpack_flags(start.flags)
+    fl = start.decisions._asdict()
     is_ellipse, br_p, br_m, found = fl["is_ellipse"], fl["br_p"], fl["br_m"], fl["found"]
     dtype = start.f0.dtype
     e = start.ellipse
