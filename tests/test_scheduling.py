@@ -199,6 +199,9 @@ def test_lane_packing_carries_booleans_as_bits_32_to_an_int32_column():
     np.testing.assert_array_equal((word[:, None] >> np.arange(32)) & 1, np.asarray(tree["b"][:, :32]))
     plain = {"a": tree["a"], "c": tree["c"]}
     assert [x.shape for x in LanePacking(plain).pack(plain)] == [(n, 3), (n, 1)]
+    empty = {"a": tree["a"], "f": tree["f"]}  # booleans, but no bit to carry
+    empty_packing = LanePacking(empty)
+    assert empty_packing.unpack(empty_packing.pack(empty))["f"].shape == (n, 0)
 
 
 def test_map_where_computes_only_the_needed_lanes():

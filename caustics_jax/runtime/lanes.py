@@ -136,7 +136,7 @@ class LanePacking:
             for j in range(1, min(self._BITS, self.bits - lo)):  # element-wise: one fused kernel
                 word = word | (columns[lo + j] << j)
             parts[jnp.dtype(jnp.int32)].append(word[:, None])
-        return tuple(jnp.concatenate(parts[g], axis=1) for g in self.groups)
+        return tuple(jnp.concatenate(parts[g], axis=1) if parts[g] else jnp.zeros((n, 0), g) for g in self.groups)
 
     def unpack(self, packed: tuple):
         mats = dict(zip(self.groups, packed, strict=True))
