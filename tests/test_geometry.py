@@ -124,7 +124,7 @@ def test_beer_lambert_halves_over_the_half_length_and_ignores_what_is_not_a_path
     """`A = exp(-sigma_t t)`: sigma_t = ln 2 / 0.5 m halves the energy every 0.5 m (1/2, 1/4,
     1/8 at 0.5, 1, 1.5 m, 1 at t = 0); a negative length attenuates nothing; clear water
     (sigma_t = 0) attenuates nothing even over an infinite length, murky water absorbs all
-    of it; the dtype of `t` is kept. Called once, on one array, for every case."""
+    of it; the dtype of `t` is kept. One call on one array per water."""
     sigma = np.log(2) / 0.5
     t = jnp.asarray([0.0, 0.5, 1.0, 1.5, -2.0, np.inf], dtype)
     A = np.asarray(beer_lambert(jnp.asarray(sigma, dtype), t))
