@@ -18,7 +18,10 @@ def test_stored_returns_every_bit(dtype):
     payload_nan = np.array([0x7FC00001 if info.bits == 32 else 0x7FF8000000000001], uint).view(dtype)
     rng = np.random.default_rng(3)
     x = np.concatenate([special, payload_nan, rng.standard_normal(64).astype(dtype)])
-    tree = {"x": x, "i": np.arange(-5, 5, dtype=np.int32), "b": np.arange(10) % 3 == 0, "m": x[:8].reshape(2, 4)}
+    # booleans: more than one word of them (70 + 3 + 10 bits), a matrix, a scalar, an empty one
+    tree = {"x": x, "i": np.arange(-5, 5, dtype=np.int32), "b": np.arange(10) % 3 == 0, "m": x[:8].reshape(2, 4),
+            "many": rng.random(70) < 0.5, "grid": rng.random((3, 1)) < 0.5, "one": np.bool_(True),
+            "none": np.zeros(0, bool)}
     out = jax.jit(stored)(tree)
     for k, v in tree.items():
         got = np.asarray(out[k])
@@ -63,6 +66,30 @@ def test_stored_decisions_are_computed_once_on_cpu():
                                   jax.jit(lambda x, ys: program(x, ys, False))(x, ys))
 
 
+def test_stored_booleans_share_one_kernel_on_cpu():
+    """Ten decisions that share one chain of 40 compares, stored together: the chain is
+    computed once (in the kernel of their shared word), where ten booleans stored one by
+    one compute it ten times (each stored leaf is its own kernel)."""
+    if jax.default_backend() != "cpu":
+        pytest.skip("the fusion behaviour measured is XLA:CPU's")
+
+    def program(x, ys, together):
+        chain = x > 0
+        for k in range(40):
+            chain = chain ^ (x * (k + 1) > k)
+        flags = [chain ^ (x > i / 10) for i in range(10)]
+        flags = stored(flags) if together else [stored(f) for f in flags]
+        return [jnp.where(f, y, -y) for f, y in zip(flags, ys, strict=True)]
+
+    x = jnp.linspace(-1, 1, 512)
+    ys = [x + i for i in range(10)]
+    apart = _fused_instructions(lambda x, ys: program(x, ys, False), x, ys)
+    together = _fused_instructions(lambda x, ys: program(x, ys, True), x, ys)
+    assert together * 3 < apart, (together, apart)
+    np.testing.assert_array_equal(jax.jit(lambda x, ys: program(x, ys, True))(x, ys),
+                                  jax.jit(lambda x, ys: program(x, ys, False))(x, ys))
+
+
 def test_the_walk_crossing_step_computes_its_decisions_once():
     """The walk's crossing step (the pool's widest program) compiles to fewer than 3,500
     fused instructions at 512 lanes: 2,443 with its outcome stored, 4,967 without, when
@@ -74,7 +101,7 @@ def test_the_walk_crossing_step_computes_its_decisions_once():
     import caustics_jax as cj
     from caustics_jax.runtime.lane_solver import stage_lane
     from caustics_jax.solvers.walk import Walk, WalkLane, WalkSolver
-    from caustics_jax.solvers.walk_steps import WALK
+    from caustics_jax.solvers.walk_steps import BISECT, WALK
 
     mesh = cj.scenes.wavy_pool(512, n_receivers=4, dtype="float32").surface
     f32 = jnp.float32
@@ -86,3 +113,6 @@ def test_the_walk_crossing_step_computes_its_decisions_once():
     moving = jax.eval_shape(jax.vmap(lambda x: solver.moving(stage_lane(solver, x))), lanes)
     count = _fused_instructions(jax.vmap(lambda m: solver.step(m, WALK)), moving)
     assert count < 3500, count
+    # The refinement step: 1,798 with its decisions stored, 2,982 without (2026-12-04).
+    count = _fused_instructions(jax.vmap(lambda m: solver.step(m, BISECT)), moving)
+    assert count < 2400, count

@@ -245,6 +245,9 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     flipped = transmits & opposite(fm, f_ok_end)
     replace_tir_end = tir_mid | flipped
     to_hi = jnp.where(searching, jnp.where(hi_lost, replace_tir_end, ~replace_tir_end), to_hi)
+    # Every field below reads these decisions: stored once (`runtime.fusion`), not
+    # copied into each field's kernel.
+    to_hi, flipped, ok, transmits = stored((to_hi, flipped, ok, transmits))
     tir_end = jnp.where(flipped, Search.NONE, s.tir_end)
     phi_lo = jnp.where(to_hi, s.phi_lo, phi)
     phi_hi = jnp.where(to_hi, phi, s.phi_hi)
@@ -271,6 +274,8 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     curved = jnp.maximum(jnp.abs(phi_lo), jnp.abs(phi_hi)) > jnp.sqrt(eps)
     stalled = (jnp.linalg.norm(ab_hi - ab_lo) <= 4 * eps * jnp.maximum(jnp.linalg.norm(ab_hi), 1)) | (
         curved & ~chord & (jnp.abs(phi_hi - phi_lo) <= 4 * eps * jnp.maximum(jnp.abs(phi_hi), 1e-30)))
+    better = ok & transmits & (jnp.abs(fm) < jnp.abs(s.best_f))
+    found, stalled, better = stored((found, stalled, better))
     mode = jnp.where(found | stalled | ~ok, DONE, BISECT)
     status = jnp.where(found, Status.FOUND, jnp.where(stalled | ~ok, Status.NOT_CONVERGED, s.status))
     # A TIR search that closed in on the onset without a sign change found no root: a walk
@@ -280,7 +285,6 @@ def _bisect_update(s: WalkState, p, phi, ok, fm, stm, tol, illinois: bool, chord
     ends = tir_end == Search.HI_TIR
     mode = jnp.where(no_root, jnp.where(ends, DONE, WALK), mode)
     status = jnp.where(no_root, jnp.where(ends, Status.TOTAL_INTERNAL_REFLECTION, s.status), status)
-    better = ok & transmits & (jnp.abs(fm) < jnp.abs(s.best_f))
     keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
     return s._replace(
         mode=mode.astype(jnp.int32), status=status.astype(jnp.int32),
