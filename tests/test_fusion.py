@@ -43,6 +43,24 @@ def _fused_instructions(fn, *args) -> int:
     return total
 
 
+def _chain(x):
+    """A chain of 40 element-wise compares."""
+    flag = x > 0
+    for k in range(40):
+        flag = flag ^ (x * (k + 1) > k)
+    return flag
+
+
+def _fused_without_and_with(program) -> tuple[int, int]:
+    """Fused instructions of `program(x, ys, False)` and of `program(x, ys, True)` on 512
+    lanes, after checking that both give the same outputs."""
+    x = jnp.linspace(-1, 1, 512)
+    ys = [x + i for i in range(10)]
+    np.testing.assert_array_equal(jax.jit(lambda x, ys: program(x, ys, True))(x, ys),
+                                  jax.jit(lambda x, ys: program(x, ys, False))(x, ys))
+    return tuple(_fused_instructions(lambda x, ys, on=on: program(x, ys, on), x, ys) for on in (False, True))
+
+
 def test_stored_decisions_are_computed_once_on_cpu():
     """Ten outputs select on one chain of 40 compares: without `stored` XLA:CPU copies the
     chain into the outputs' kernels, with it the chain is computed once."""
@@ -50,20 +68,11 @@ def test_stored_decisions_are_computed_once_on_cpu():
         pytest.skip("the fusion behaviour measured is XLA:CPU's")
 
     def program(x, ys, store):
-        flag = x > 0
-        for k in range(40):
-            flag = flag ^ (x * (k + 1) > k)
-        if store:
-            flag = stored(flag)
+        flag = stored(_chain(x)) if store else _chain(x)
         return [jnp.where(flag, y, -y) * (i + 2) for i, y in enumerate(ys)]
 
-    x = jnp.linspace(-1, 1, 512)
-    ys = [x + i for i in range(10)]
-    copied = _fused_instructions(lambda x, ys: program(x, ys, False), x, ys)
-    once = _fused_instructions(lambda x, ys: program(x, ys, True), x, ys)
+    copied, once = _fused_without_and_with(program)
     assert once * 3 < copied, (once, copied)
-    np.testing.assert_array_equal(jax.jit(lambda x, ys: program(x, ys, True))(x, ys),
-                                  jax.jit(lambda x, ys: program(x, ys, False))(x, ys))
 
 
 def test_stored_booleans_share_one_kernel_on_cpu():
@@ -74,20 +83,13 @@ def test_stored_booleans_share_one_kernel_on_cpu():
         pytest.skip("the fusion behaviour measured is XLA:CPU's")
 
     def program(x, ys, together):
-        chain = x > 0
-        for k in range(40):
-            chain = chain ^ (x * (k + 1) > k)
+        chain = _chain(x)
         flags = [chain ^ (x > i / 10) for i in range(10)]
         flags = stored(flags) if together else [stored(f) for f in flags]
         return [jnp.where(f, y, -y) for f, y in zip(flags, ys, strict=True)]
 
-    x = jnp.linspace(-1, 1, 512)
-    ys = [x + i for i in range(10)]
-    apart = _fused_instructions(lambda x, ys: program(x, ys, False), x, ys)
-    together = _fused_instructions(lambda x, ys: program(x, ys, True), x, ys)
+    apart, together = _fused_without_and_with(program)
     assert together * 3 < apart, (together, apart)
-    np.testing.assert_array_equal(jax.jit(lambda x, ys: program(x, ys, True))(x, ys),
-                                  jax.jit(lambda x, ys: program(x, ys, False))(x, ys))
 
 
 def test_the_walk_crossing_step_computes_its_decisions_once():
