@@ -262,6 +262,33 @@ def test_map_where_without_out_gives_zeros_elsewhere_and_traces_fn_once():
     assert calls == [(), ()]  # once under map_where's jit, once for `want` above
 
 
+def test_map_where_on_its_own_record_reads_each_lane_before_writing_it():
+    """A stage that updates its own record (`map_where(fn, need, rec, rec)`, read from the
+    packed record it writes): every needed lane gets `fn` of its original value over several
+    trips, the others keep theirs, as with a separate copy of the arguments; with no lane
+    needed, the record itself (and `out=None`: zeros)."""
+    rng = np.random.default_rng(5)
+    rec = {"i": jnp.asarray(rng.integers(-50, 50, 300), jnp.int32), "b": jnp.asarray(rng.integers(0, 2, 300), bool),
+           "m": jnp.asarray(rng.normal(size=(300, 2)), jnp.float32)}
+
+    def fn(r):
+        return {"i": r["i"] * 3 + 1, "b": ~r["b"], "m": r["m"][::-1] * 2}
+
+    need = jnp.asarray(rng.integers(0, 2, 300), bool)
+    own = jax.jit(lambda n, r: map_where(fn, n, r, r, chunk=16))
+    copy = jax.jit(lambda n, r, a: map_where(fn, n, r, a, chunk=16))
+    got, want = own(need, rec), copy(need, rec, jax.tree.map(jnp.copy, rec))
+    for key in rec:
+        mask = np.asarray(need).reshape((-1,) + (1,) * (rec[key].ndim - 1))
+        np.testing.assert_array_equal(np.asarray(got[key]), np.where(mask, jax.vmap(fn)(rec)[key], rec[key]), key)
+        np.testing.assert_array_equal(np.asarray(got[key]), np.asarray(want[key]), key)
+    none = jnp.zeros(300, bool)
+    for key, value in own(none, rec).items():
+        np.testing.assert_array_equal(np.asarray(value), np.asarray(rec[key]), key)
+    zeros = jax.jit(lambda n, r: map_where(fn, n, None, r, chunk=16))(none, rec)
+    assert all(not np.any(np.asarray(v)) for v in zeros.values())
+
+
 def test_run_pools_equals_a_per_lane_loop():
     """Two pools: each lane sees `steps[k](state)` for the pool `k` it is routed to until it
     is done, as in a per-lane loop that branches on its route (the walk's crossing and
