@@ -53,7 +53,8 @@ def run_pools(steps: tuple, route, states, slots: int | tuple[int, ...]):
     lanes routed to it; after every trip the lanes whose route changed are written back
     and queued for their next pool (or leave when done), and every pool refills its free
     slots from its queue. A pool without a busy
-    slot skips its step (`lax.cond`). A lane sees the same sequence of steps as in a
+    slot skips its step, and one with no slot to refill skips its refill's gather (`lax.cond`:
+    a pool drains with one or two lanes for tens of trips). A lane sees the same sequence of steps as in a
     per-lane loop that branches on its state, so the results are those of that loop; a
     branch that few lanes need costs only those lanes' slots.
 
@@ -104,7 +105,9 @@ def run_pools(steps: tuple, route, states, slots: int | tuple[int, ...]):
             fill = free & (pos < tails[k])
             lanes_[k] = jnp.where(fill, bufs[k][pos % n], lanes_[k])
             heads[k] = heads[k] + jnp.minimum(jnp.sum(free, dtype=jnp.int32), tails[k] - heads[k])
-            slot_states[k] = select_lanes(fill, take_rows(states, lanes_[k]), slot_states[k])
+            slot_states[k] = jax.lax.cond(
+                jnp.any(fill), lambda s, f=fill, lane=lanes_[k]: select_lanes(f, take_rows(states, lane), s),
+                lambda s: s, slot_states[k])
         return states, tuple(bufs), tuple(heads), tuple(tails), tuple(lanes_), tuple(slot_states)
 
     return packing.unpack(jax.lax.while_loop(cond, body, carry)[0])
