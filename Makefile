@@ -28,7 +28,7 @@ demo: $(STAMP)
 	$(VENV)/bin/caustics-jax demo --cpu-devices all --figure figures/solver_comparison.png --json figures/solver_comparison.json
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --hypothesis-profile=ci
+	$(PY) -m pytest -q -n 2 --dist loadfile --hypothesis-profile=ci
 
 # Every experiment's figure and JSON on the CPU (an hour or more: the start-point sweep
 # builds a 1M-triangle scene, the throughput benchmark alone takes ~10 minutes). The GLSL
