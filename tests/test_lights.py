@@ -53,6 +53,30 @@ def test_the_placed_point_is_on_the_ray_toward_the_light_at_the_limit_distance()
     assert scene_size(np.array([[0, 0, 0], [4.0, 2, 0]]), np.array([[2.0, 1, -10]])) == 20.0
 
 
+def test_lights_that_cannot_be_far_are_placed_as_when_one_lane_is():
+    """`light_points` skips the normalisation when no lane can be farther than `R` (every
+    component of `L - P` below `R / sqrt(3)`): the same lanes, with and without one far lane
+    that forces the full computation, come back bit for bit; lanes along the diagonal just
+    inside and outside `R` are far exactly where `|L - P| > R`."""
+    R = limit_distance(4.0, np.float32)
+    rng = np.random.default_rng(3)
+    P = rng.uniform(-2, 2, (64, 3))
+    u = rng.normal(size=(64, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    near = P + (R / np.sqrt(3)) * rng.uniform(0.5, 0.999, (64, 1)) * u
+    diag = np.full(3, 1 / np.sqrt(3))
+    edge = np.stack([P[0] + R * (1 - 1e-9) * diag, P[1] + R * (1 + 1e-9) * diag])
+    alone = light_points(near, P, 4.0, np.float32)
+    mixed = light_points(np.concatenate([near, edge]), np.concatenate([P, P[:2]]), 4.0, np.float32)
+    assert not alone.at_infinity.any() and np.all(alone.gain == 1)
+    np.testing.assert_array_equal(alone.points, near)
+    for a, b in zip(alone, mixed, strict=True):
+        np.testing.assert_array_equal(a, b[:64])
+    assert mixed.at_infinity[64:].tolist() == [False, True]
+    np.testing.assert_array_equal(mixed.points[64], edge[0])
+    np.testing.assert_allclose(np.linalg.norm(mixed.points[65] - P[1]), R, rtol=1e-12)
+
+
 @pytest.mark.parametrize("dtype, tol", [("float64", 1e-10), ("float32", 1e-5)])
 def test_found_paths_refract_exactly_toward_the_light_at_infinity(wavy, dtype, tol):
     """Checked against the limit itself: the oracle's `w_L` is `Directional.toward`, not the

@@ -138,6 +138,10 @@ def check_points(name: str, value, dtype) -> np.ndarray:
     X = real_array(name, value)
     if X.ndim == 0 or X.shape[-1] != 3:
         raise ValueError(f"{name} must have shape (N, 3) (or broadcast to it), got {X.shape}")
+    # One pass decides the common case: a largest magnitude below `dtype`'s largest finite
+    # number is finite (NaN propagates through the max) and casts to a finite number.
+    if X.size == 0 or float(np.max(np.abs(X))) < float(np.finfo(dtype).max):
+        return X
     with np.errstate(over="ignore"):
         bad = ~np.all(np.isfinite(X) & np.isfinite(X.astype(dtype)), axis=-1)
     if np.any(bad):

@@ -71,7 +71,9 @@ def check_lanes(mesh: SurfaceMesh, P, L, origin=None):
     P_np = P_np.reshape(-1, 3) if P_np.ndim == 1 else P_np
     # A directional light, or a point light beyond the limit distance: the point on each
     # receiver's ray toward it (surface/lights.py, math.md §9).
-    L_np = light_points(L, P_np, scene_size(np.asarray(mesh.vertices, np.float64), P_np), dtype).points
+    L_in = L if isinstance(L, Directional) else L_np  # (checked above)
+    L_np = light_points(L_in, P_np, scene_size(np.asarray(mesh.vertices, np.float64), P_np), dtype,
+                        checked=True).points
     check_scene_scale(np.asarray(mesh.vertices), (P_np,), dtype, (L_np,))
     if origin is not None and np.any(origin):
         P_np, L_np = P_np - origin, L_np - origin

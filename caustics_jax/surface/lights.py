@@ -97,7 +97,7 @@ class PlacedLights(NamedTuple):
     gain: np.ndarray
 
 
-def light_points(L, P: np.ndarray, size: float, dtype) -> PlacedLights:
+def light_points(L, P: np.ndarray, size: float, dtype, *, checked: bool = False) -> PlacedLights:
     """Each lane's light as a float64 point (`PlacedLights`), for receivers `P` `(N, 3)`
     (float64) in a scene of extent `size` (`scene_size`).
 
@@ -107,16 +107,22 @@ def light_points(L, P: np.ndarray, size: float, dtype) -> PlacedLights:
     formula's value then equals its limit to within rounding (module docstring), and the
     solvers' products of lengths stay inside the dtype's range (a light 1e18 m away from a
     10 km pool had overflowed float32's conic products: 90% of its lanes kept their status,
-    against all at 2.5e12 m)."""
+    against all at 2.5e12 m). `checked=True`: `L` is already `check_points`' float64 array
+    (`solve`'s boundary checked it), not checked again."""
     P = np.asarray(P, np.float64).reshape(-1, 3)
     R = limit_distance(max(size, np.finfo(np.float64).tiny), dtype)
     if isinstance(L, Directional):
         n = P.shape[0]
         return PlacedLights(P + R * L.toward, np.ones(n, bool), np.ones(n))
-    L_np = check_points("L", L, dtype)
+    L_np = L if checked else check_points("L", L, dtype)
     L_np, P_b = np.broadcast_arrays(L_np.reshape(-1, 3) if L_np.ndim == 1 else L_np, P)
     v = L_np - P_b
     big = np.max(np.abs(v), axis=-1, keepdims=True)  # scaled first: |v|^2 of 1e200 overflows
+    n = P_b.shape[0]
+    # No lane can be far (|v| <= sqrt(3) max|v_i|, the rounding of the norm bounded by the
+    # 1e-15): every point is the light itself, and the lanes skip the normalisation below.
+    if n == 0 or float(np.max(big)) * np.sqrt(3.0) * (1 + 1e-15) <= R:
+        return PlacedLights(np.array(L_np), np.zeros(n, bool), np.ones(n))
     unit = v / np.where(big > 0, big, 1)
     dist = big[:, 0] * np.linalg.norm(unit, axis=-1)
     far = dist > R
