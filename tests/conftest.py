@@ -10,6 +10,11 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)
+# The suite's two workers share the persistent compilation cache (the package points JAX at
+# it at the first solve): programs that compile in a quarter second (start points per
+# mesh, the kernels' shapes) are kept too, so the other worker, and this one after
+# `release_compiled_programs`, load them instead of compiling them again.
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.25)
 
 # Examples are whole batches (arrays), so few examples cover many cases; derandomised in CI
 # so a failure reproduces.
